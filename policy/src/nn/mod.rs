@@ -1,0 +1,37 @@
+//! Layers with hand-written forward and backward passes over `matrixmultiply::sgemm`.
+//!
+//! Conventions: every tensor is a row-major `f32` slice; parameters and gradients live in a
+//! [`ParamStore`] and layers hold [`Slot`]s into it; `forward(p, ...)` reads parameters
+//! from `p`, `backward(p, g, ...)` ACCUMULATES parameter gradients into `g`. Activations
+//! needed by backward are kept by the caller (networks own caches that are resized, not
+//! reallocated, after the first call).
+
+pub mod adam;
+pub mod attention;
+pub mod categorical;
+pub mod gemm;
+#[cfg(test)]
+pub mod gradcheck;
+pub mod gru;
+pub mod init;
+pub mod layernorm;
+pub mod linear;
+pub mod params;
+pub mod relu;
+pub mod tanh;
+
+pub use adam::{clip_grad_norm, Adam, AdamConfig};
+pub use attention::{MhaCache, MhaConfig, MultiHeadAttention};
+pub use gru::{Gru, GruCache, GruConfig};
+pub use init::Init;
+pub use layernorm::{LayerNorm, LayerNormConfig};
+pub use linear::{Linear, LinearConfig};
+pub use params::{ParamEntry, ParamStore, Slot};
+
+/// Resize a buffer to exactly `n` elements (no reallocation once capacity suffices) and
+/// return it as a slice. Contents are unspecified: callers overwrite them.
+#[inline]
+pub fn sized(v: &mut Vec<f32>, n: usize) -> &mut [f32] {
+    v.resize(n, 0.0);
+    &mut v[..n]
+}
