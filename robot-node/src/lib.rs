@@ -1,0 +1,15 @@
+//! `robot_node`: one decentralized tending controller per robot.
+//!
+//! - [`args`]: ROS 2 command-line conventions (`--ros-args`, `-r`, `-p`, `--params-file`),
+//!   `ROS_DOMAIN_ID`;
+//! - [`world`]: latest validated inputs with staleness, and the observation built from them;
+//! - [`controller`]: the [`controller::Controller`] trait (seam for the learned policy)
+//!   and the scripted greedy controller;
+//! - [`tick`]: one control step, DDS-free;
+//! - [`node`]: the ros2-client node (discovery, subscriptions, timing, cmd_vel).
+
+pub mod args;
+pub mod controller;
+pub mod node;
+pub mod tick;
+pub mod world;

@@ -1,0 +1,403 @@
+//! The DDS side: one ros2-client node per robot. Subscribes to its own pose/has_part,
+//! discovers machines, storages and peers from topic discovery, ticks the [`Brain`] at the
+//! control rate (wall clock, or `/clock` with `use_sim_time`) and publishes `cmd_vel`.
+//!
+//! Single-threaded event loop on a mio 1 `Poll` (every subscription is a mio source);
+//! the ros2-client spinner (graph events, parameters, rosout discovery) runs on a
+//! helper thread with a smol executor.
+
+use std::collections::HashSet;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::{Duration, Instant};
+
+use anyhow::{anyhow, Context as _};
+use ros2_client::dds::rustdds::mio1::{Events, Interest, Poll, Token};
+use ros2_client::dds::{Context, ContextOptions, Node, Publisher, Subscription};
+use ros2_client::log::LogLevel;
+use ros2_client::{rosout, Name, NodeName, NodeOptions};
+use tracing::{debug, info, warn};
+
+use msgs::topics::{self, Leaf};
+use msgs::{Bool, Clock, EntityTopic, PoseStamped, Profile, RosMessage, Twist};
+
+use crate::args::{ControllerKind, Params};
+use crate::controller::{Controller, GreedyController};
+use crate::tick::{Brain, Outcome};
+use crate::world::{Counters, DropReason, World, WorldConfig};
+
+/// Build the controller the parameters ask for.
+///
+/// The learned policy is the seam: `policy::Policy::load(path)` wrapped in a
+/// `Controller` (reset = `new_state()`, act = `act(..)` -> [`crate::controller::action_velocity`]).
+/// The `policy` crate is not integrated yet, so asking for it is an error rather than a
+/// silent fallback to the scripted controller.
+pub fn make_controller(p: &Params) -> anyhow::Result<Box<dyn Controller>> {
+    match p.controller {
+        ControllerKind::Greedy => Ok(Box::new(GreedyController::new(p.k_speed as f32))),
+        ControllerKind::Policy => Err(anyhow!(
+            "controller `policy` (policy file {:?}) is not available in this build: the \
+             learned policy is not integrated yet; use -p controller:=greedy",
+            p.policy
+        )),
+    }
+}
+
+enum SubKind {
+    Pose(Subscription<PoseStamped>),
+    Flag(Subscription<Bool>),
+}
+
+struct Sub {
+    topic: EntityTopic,
+    kind: SubKind,
+}
+
+const CLOCK_TOKEN: Token = Token(usize::MAX - 1);
+
+fn dds_err<E: std::fmt::Debug>(what: &str) -> impl FnOnce(E) -> anyhow::Error + '_ {
+    move |e| anyhow!("{what}: {e:?}")
+}
+
+fn subscribe<M: RosMessage>(
+    node: &mut Node,
+    ros_name: &str,
+    profile: Profile,
+) -> anyhow::Result<Subscription<M>> {
+    let name = Name::parse(ros_name).map_err(dds_err("topic name"))?;
+    let qos = profile.qos();
+    let topic = node
+        .create_topic(&name, M::type_name(), &qos)
+        .map_err(dds_err("create topic"))?;
+    node.create_subscription::<M>(&topic, Some(qos))
+        .map_err(dds_err("create subscription"))
+}
+
+/// Run the node until `stop` is set. Returns the final counters.
+pub fn run(p: &Params, stop: &AtomicBool) -> anyhow::Result<Counters> {
+    let controller = make_controller(p)?;
+    let me = p.robot_id();
+    if me.is_empty() {
+        return Err(anyhow!(
+            "no robot namespace: start with --ros-args -r __ns:=/robot_N"
+        ));
+    }
+    let ctx = Context::with_options(ContextOptions::new().domain_id(p.domain_id))
+        .map_err(dds_err("DDS context"))?;
+    let mut node = ctx
+        .new_node(
+            NodeName::new(&p.namespace, &p.node_name).map_err(dds_err("node name"))?,
+            NodeOptions::new().enable_rosout(p.enable_rosout),
+        )
+        .map_err(dds_err("create node"))?;
+    let spinner = node.spinner().map_err(dds_err("spinner"))?;
+    let spin_thread = std::thread::Builder::new()
+        .name("ros2-spinner".into())
+        .spawn(move || {
+            if let Err(e) = smol::block_on(spinner.spin()) {
+                warn!("spinner stopped with error: {e:?}");
+            }
+        })?;
+
+    let result = event_loop(p, stop, &ctx, &mut node, controller, &me);
+    drop(node); // signals the spinner to stop
+    if spin_thread.join().is_err() {
+        warn!("spinner thread panicked");
+    }
+    result
+}
+
+fn event_loop(
+    p: &Params,
+    stop: &AtomicBool,
+    ctx: &Context,
+    node: &mut Node,
+    controller: Box<dyn Controller>,
+    me: &str,
+) -> anyhow::Result<Counters> {
+    let world = World::new(
+        me,
+        WorldConfig {
+            stale_timeout_s: p.stale_timeout_s,
+            static_stale_timeout_s: p.static_stale_timeout_s,
+            room: msgs::RoomBounds {
+                half_extent: msgs::validate::ROOM_HALF_EXTENT,
+                margin: p.room_margin,
+            },
+        },
+    );
+    let mut brain = Brain::new(world, controller, p.k_speed);
+
+    let cmd_name = topics::robot(me, Leaf::CmdVel).ros_name();
+    let cmd_qos = Profile::RobotStream.qos();
+    let cmd_topic = node
+        .create_topic(
+            &Name::parse(&cmd_name).map_err(dds_err("topic name"))?,
+            Twist::type_name(),
+            &cmd_qos,
+        )
+        .map_err(dds_err("create cmd_vel topic"))?;
+    let cmd_pub: Publisher<Twist> = node
+        .create_publisher(&cmd_topic, Some(cmd_qos))
+        .map_err(dds_err("create cmd_vel publisher"))?;
+
+    let mut poll = Poll::new().context("mio poll")?;
+    let mut events = Events::with_capacity(256);
+    let mut subs: Vec<Sub> = Vec::new();
+    let mut known: HashSet<EntityTopic> = HashSet::new();
+
+    let add_sub = |node: &mut Node,
+                   poll: &Poll,
+                   subs: &mut Vec<Sub>,
+                   topic: EntityTopic|
+     -> anyhow::Result<()> {
+        let profile = topic
+            .profile()
+            .ok_or_else(|| anyhow!("no profile for {topic:?}"))?;
+        let name = topic.ros_name();
+        let token = Token(subs.len());
+        let kind = match topic.leaf {
+            Leaf::Pose => {
+                let mut s = subscribe::<PoseStamped>(node, &name, profile)?;
+                poll.registry()
+                    .register(&mut s, token, Interest::READABLE)?;
+                SubKind::Pose(s)
+            }
+            Leaf::HasPart | Leaf::PartReady => {
+                let mut s = subscribe::<Bool>(node, &name, profile)?;
+                poll.registry()
+                    .register(&mut s, token, Interest::READABLE)?;
+                SubKind::Flag(s)
+            }
+            Leaf::CmdVel => return Err(anyhow!("robot_node does not subscribe to cmd_vel")),
+        };
+        debug!("subscribed to {name}");
+        subs.push(Sub { topic, kind });
+        Ok(())
+    };
+
+    for leaf in [Leaf::Pose, Leaf::HasPart] {
+        let t = topics::robot(me, leaf);
+        known.insert(t.clone());
+        add_sub(node, &poll, &mut subs, t)?;
+    }
+    let mut clock_sub: Option<Subscription<Clock>> = if p.use_sim_time {
+        let mut s = subscribe::<Clock>(node, topics::CLOCK, Profile::Clock)?;
+        poll.registry()
+            .register(&mut s, CLOCK_TOKEN, Interest::READABLE)?;
+        Some(s)
+    } else {
+        None
+    };
+
+    let log = node.logging_handle();
+    rosout!(
+        log,
+        LogLevel::Info,
+        "robot_node {} up: domain {}, controller {}, {} Hz ({}), k_speed {} m/s, stale {} s / static {} s",
+        p.fully_qualified_name(),
+        p.domain_id,
+        brain.controller.name(),
+        p.control_rate_hz,
+        if p.use_sim_time { "sim time from /clock" } else { "wall clock" },
+        p.k_speed,
+        p.stale_timeout_s,
+        p.static_stale_timeout_s
+    );
+
+    let t0 = Instant::now();
+    let now_s = |t0: Instant| t0.elapsed().as_secs_f64();
+    let period = Duration::from_secs_f64(1.0 / p.control_rate_hz);
+    let mut next_tick = t0;
+    let mut next_discovery = t0;
+    let stats_period = Duration::from_secs_f64(p.stats_period_s);
+    let mut next_stats = t0 + stats_period;
+    let mut last_outcome: Option<Outcome> = None;
+    let mut wrong_type_warned: HashSet<String> = HashSet::new();
+    // sim time: last tick index = floor(t * rate), last clock value
+    let mut sim_last_index: Option<i64> = None;
+    let mut sim_last_t: f64 = f64::NEG_INFINITY;
+
+    let publish = |brain: &mut Brain, v: [f64; 2]| {
+        if cmd_pub.publish(Twist::planar(v[0], v[1])).is_err() {
+            brain.counters.publish_errors += 1;
+        }
+    };
+
+    while !stop.load(Ordering::SeqCst) {
+        // ---- wait for data or the next deadline (at most 100 ms, to notice `stop`)
+        let now = Instant::now();
+        let mut deadline = next_discovery
+            .min(next_stats)
+            .min(now + Duration::from_millis(100));
+        if clock_sub.is_none() {
+            deadline = deadline.min(next_tick);
+        }
+        let timeout = deadline.saturating_duration_since(now);
+        if let Err(e) = poll.poll(&mut events, Some(timeout)) {
+            if e.kind() != std::io::ErrorKind::Interrupted {
+                return Err(e).context("mio poll");
+            }
+        }
+
+        // ---- drain every subscription (mio is edge triggered; draining all is cheap
+        //      and avoids missing a wake-up)
+        let t = now_s(t0);
+        for sub in &subs {
+            drain(sub, &mut brain, t);
+        }
+
+        // ---- discovery
+        let now = Instant::now();
+        if now >= next_discovery {
+            next_discovery = now + Duration::from_secs_f64(p.discovery_period_s);
+            for d in ctx.discovered_topics() {
+                let Some(topic) = topics::parse_topic(&d.name) else {
+                    continue;
+                };
+                if topic.leaf == Leaf::CmdVel || known.contains(&topic) {
+                    continue;
+                }
+                let expected = topic.msg_def().map(|m| m.dds_name());
+                if expected.as_deref() != Some(d.type_name.as_str()) {
+                    if wrong_type_warned.insert(d.name.clone()) {
+                        warn!(
+                            "ignoring topic {} of type {} (expected {:?})",
+                            d.name, d.type_name, expected
+                        );
+                    }
+                    continue;
+                }
+                known.insert(topic.clone());
+                match add_sub(node, &poll, &mut subs, topic.clone()) {
+                    Ok(()) => {
+                        brain.counters.subscriptions = subs.len() as u64;
+                        info!("discovered {}", topic.ros_name());
+                    }
+                    Err(e) => warn!("cannot subscribe to {}: {e:#}", topic.ros_name()),
+                }
+            }
+            brain.counters.subscriptions = subs.len() as u64;
+        }
+
+        // ---- tick
+        let due = if let Some(clock) = clock_sub.as_ref() {
+            let mut latest: Option<f64> = None;
+            loop {
+                match clock.take() {
+                    Ok(Some((c, _))) => latest = Some(c.clock.as_secs_f64()),
+                    Ok(None) => break,
+                    Err(e) => {
+                        debug!("dropped /clock sample: {e:?}");
+                        brain.counters.drop(DropReason::Decode);
+                    }
+                }
+            }
+            match latest {
+                Some(st) => {
+                    if st + 1e-9 < sim_last_t {
+                        info!("sim time went back ({sim_last_t} -> {st}): resetting controller");
+                        brain.reset();
+                        sim_last_index = None;
+                    }
+                    sim_last_t = st;
+                    let idx = (st * p.control_rate_hz + 1e-6).floor() as i64;
+                    if sim_last_index.is_none_or(|l| idx > l) {
+                        sim_last_index = Some(idx);
+                        true
+                    } else {
+                        false
+                    }
+                }
+                None => false,
+            }
+        } else {
+            let now = Instant::now();
+            if now >= next_tick {
+                next_tick += period;
+                if next_tick < now {
+                    next_tick = now + period; // overrun: skip, do not burst
+                }
+                true
+            } else {
+                false
+            }
+        };
+        if due {
+            let r = brain.tick(now_s(t0));
+            publish(&mut brain, r.velocity);
+            let changed = last_outcome
+                .as_ref()
+                .is_none_or(|l| !l.same_kind(&r.outcome));
+            if changed {
+                match &r.outcome {
+                    Outcome::Command => rosout!(
+                        log,
+                        LogLevel::Info,
+                        "controlling: observation counts {:?}",
+                        r.counts
+                    ),
+                    other => rosout!(log, LogLevel::Warn, "commanding zero velocity: {other:?}"),
+                }
+            }
+            last_outcome = Some(r.outcome);
+        }
+
+        // ---- stats
+        if Instant::now() >= next_stats {
+            next_stats += stats_period;
+            let (m, s, r) = brain.world.known();
+            info!(
+                "counters: {} | known machines={m} storages={s} peers={r}",
+                brain.counters
+            );
+        }
+    }
+
+    // ---- shutdown: stop the robot
+    publish(&mut brain, [0.0, 0.0]);
+    rosout!(log, LogLevel::Info, "stopping: published zero cmd_vel");
+    info!("final counters: {}", brain.counters);
+    // give the reliable writer a moment to deliver the zero command before teardown
+    let until = Instant::now() + Duration::from_millis(300);
+    while Instant::now() < until {
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    if let Some(mut c) = clock_sub.take() {
+        poll.registry().deregister(&mut c).ok();
+    }
+    Ok(brain.counters)
+}
+
+fn drain(sub: &Sub, brain: &mut Brain, now: f64) {
+    // bounded, so a flood on one topic cannot starve the loop
+    for _ in 0..1000 {
+        let res = match &sub.kind {
+            SubKind::Pose(s) => match s.take() {
+                Ok(Some((m, _))) => Some(brain.world.on_pose(&sub.topic, &m, now)),
+                Ok(None) => None,
+                Err(e) => {
+                    debug!("undecodable sample on {}: {e:?}", sub.topic.ros_name());
+                    Some(Err(DropReason::Decode))
+                }
+            },
+            SubKind::Flag(s) => match s.take() {
+                Ok(Some((m, _))) => Some(brain.world.on_flag(&sub.topic, m.data, now)),
+                Ok(None) => None,
+                Err(e) => {
+                    debug!("undecodable sample on {}: {e:?}", sub.topic.ros_name());
+                    Some(Err(DropReason::Decode))
+                }
+            },
+        };
+        match res {
+            None => return,
+            Some(Ok(())) => brain.counters.accepted += 1,
+            Some(Err(r)) => {
+                if brain.counters.dropped() < 20 || brain.counters.dropped().is_power_of_two() {
+                    warn!("dropped a sample on {}: {r:?}", sub.topic.ros_name());
+                }
+                brain.counters.drop(r);
+            }
+        }
+    }
+}

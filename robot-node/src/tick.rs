@@ -1,0 +1,230 @@
+//! One control step: world -> observation -> controller -> velocity command.
+
+use crate::controller::Controller;
+use crate::world::{Counters, OwnStale, World};
+
+/// What a tick decided.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Outcome {
+    /// The controller's command.
+    Command,
+    /// Own inputs unusable: zero velocity.
+    OwnStale(OwnStale),
+    /// The observation failed validation: zero velocity.
+    ObsInvalid(String),
+    /// The controller failed: zero velocity.
+    ControllerError(String),
+    /// The controller returned a non-finite velocity: zero velocity.
+    BadOutput,
+}
+
+impl Outcome {
+    /// Same kind (ignoring messages), for logging transitions only.
+    pub fn same_kind(&self, other: &Outcome) -> bool {
+        std::mem::discriminant(self) == std::mem::discriminant(other)
+    }
+}
+
+#[derive(Debug, Clone, PartialEq)]
+pub struct TickResult {
+    /// (vx, vy) m/s to publish as Twist linear.x / linear.y.
+    pub velocity: [f64; 2],
+    pub outcome: Outcome,
+    /// Entity counts in the observation (machines, storages, peers), if one was built.
+    pub counts: Option<obs::Counts>,
+}
+
+/// World model + controller + counters: everything a tick needs, no DDS.
+pub struct Brain {
+    pub world: World,
+    pub controller: Box<dyn Controller>,
+    pub k_speed: f64,
+    pub counters: Counters,
+    own_ok: bool,
+}
+
+impl Brain {
+    pub fn new(world: World, controller: Box<dyn Controller>, k_speed: f64) -> Self {
+        Self {
+            world,
+            controller,
+            k_speed,
+            counters: Counters::default(),
+            own_ok: false,
+        }
+    }
+
+    /// Reset the controller state (e.g. sim time went backwards: new episode).
+    pub fn reset(&mut self) {
+        self.controller.reset();
+    }
+
+    pub fn tick(&mut self, now: f64) -> TickResult {
+        self.counters.ticks += 1;
+        let zero = |outcome, counts| TickResult {
+            velocity: [0.0, 0.0],
+            outcome,
+            counts,
+        };
+        let builder = match self.world.observation(now) {
+            Ok(b) => b,
+            Err(s) => {
+                self.own_ok = false;
+                self.counters.zero_own_stale += 1;
+                return zero(Outcome::OwnStale(s), None);
+            }
+        };
+        if !self.own_ok {
+            // own inputs are back (or first arrived): start from a fresh controller state
+            self.controller.reset();
+            self.own_ok = true;
+        }
+        let batch = match builder.build() {
+            Ok(b) => b,
+            Err(e) => {
+                self.counters.zero_obs_invalid += 1;
+                return zero(Outcome::ObsInvalid(e.to_string()), None);
+            }
+        };
+        let counts = Some(batch.counts);
+        let v = match self.controller.act(&batch) {
+            Ok(v) => v,
+            Err(e) => {
+                self.counters.zero_controller_error += 1;
+                return zero(Outcome::ControllerError(format!("{e:#}")), counts);
+            }
+        };
+        if !v.iter().all(|x| x.is_finite()) {
+            self.counters.zero_bad_output += 1;
+            return zero(Outcome::BadOutput, counts);
+        }
+        let k = self.k_speed;
+        self.counters.commands += 1;
+        TickResult {
+            velocity: [(v[0] as f64).clamp(-k, k), (v[1] as f64).clamp(-k, k)],
+            outcome: Outcome::Command,
+            counts,
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::controller::GreedyController;
+    use crate::world::WorldConfig;
+    use msgs::topics::{machine, robot, storage};
+    use msgs::{Leaf, PoseStamped, RoomBounds, Time};
+
+    use std::sync::atomic::{AtomicUsize, Ordering};
+    use std::sync::Arc;
+
+    struct Fixed(Result<[f32; 2], String>, Arc<AtomicUsize>);
+    impl Controller for Fixed {
+        fn reset(&mut self) {
+            self.1.fetch_add(1, Ordering::SeqCst);
+        }
+        fn act(&mut self, _: &obs::ObsBatch) -> anyhow::Result<[f32; 2]> {
+            self.0.clone().map_err(|e| anyhow::anyhow!(e))
+        }
+        fn name(&self) -> &'static str {
+            "fixed"
+        }
+    }
+
+    fn world() -> World {
+        World::new(
+            "robot_0",
+            WorldConfig {
+                stale_timeout_s: 1.0,
+                static_stale_timeout_s: 1.0,
+                room: RoomBounds::default(),
+            },
+        )
+    }
+    fn p(x: f64, y: f64) -> PoseStamped {
+        PoseStamped::planar(Time::default(), "map", x, y)
+    }
+    fn feed(w: &mut World, t: f64) {
+        w.on_pose(&robot("robot_0", Leaf::Pose), &p(-0.5, -0.5), t)
+            .unwrap();
+        w.on_flag(&robot("robot_0", Leaf::HasPart), false, t)
+            .unwrap();
+        w.on_pose(&machine(0, Leaf::Pose), &p(0.5, -0.5), t)
+            .unwrap();
+        w.on_flag(&machine(0, Leaf::PartReady), true, t).unwrap();
+        w.on_pose(&storage(0, Leaf::Pose), &p(-0.5, 0.8), t)
+            .unwrap();
+    }
+
+    #[test]
+    fn greedy_heads_to_machine_then_stops_when_stale() {
+        let mut b = Brain::new(world(), Box::new(GreedyController::new(0.5)), 0.5);
+        let r = b.tick(0.0);
+        assert_eq!(r.outcome, Outcome::OwnStale(OwnStale::NoPose));
+        assert_eq!(r.velocity, [0.0, 0.0]);
+        feed(&mut b.world, 0.0);
+        let r = b.tick(0.1);
+        assert_eq!(r.outcome, Outcome::Command);
+        assert_eq!(r.velocity, [0.5, 0.0]);
+        assert_eq!(
+            r.counts,
+            Some(obs::Counts {
+                machines: 1,
+                storages: 1,
+                peers: 0
+            })
+        );
+        let r = b.tick(1.5);
+        assert_eq!(r.outcome, Outcome::OwnStale(OwnStale::PoseStale));
+        assert_eq!(r.velocity, [0.0, 0.0]);
+        assert_eq!(b.counters.commands, 1);
+        assert_eq!(b.counters.zero_own_stale, 2);
+    }
+
+    #[test]
+    fn controller_failures_give_zero() {
+        let mut b = Brain::new(
+            world(),
+            Box::new(Fixed(Err("boom".into()), Default::default())),
+            0.5,
+        );
+        feed(&mut b.world, 0.0);
+        let r = b.tick(0.0);
+        assert!(matches!(r.outcome, Outcome::ControllerError(ref s) if s.contains("boom")));
+        assert_eq!(r.velocity, [0.0, 0.0]);
+        let mut b = Brain::new(
+            world(),
+            Box::new(Fixed(Ok([f32::NAN, 0.0]), Default::default())),
+            0.5,
+        );
+        feed(&mut b.world, 0.0);
+        assert_eq!(b.tick(0.0).outcome, Outcome::BadOutput);
+        let mut b = Brain::new(
+            world(),
+            Box::new(Fixed(Ok([3.0, -3.0]), Default::default())),
+            0.5,
+        );
+        feed(&mut b.world, 0.0);
+        assert_eq!(b.tick(0.0).velocity, [0.5, -0.5]);
+    }
+
+    #[test]
+    fn controller_reset_when_own_inputs_return() {
+        let resets = Arc::new(AtomicUsize::new(0));
+        let mut b = Brain::new(
+            world(),
+            Box::new(Fixed(Ok([0.0, 0.0]), resets.clone())),
+            0.5,
+        );
+        feed(&mut b.world, 0.0);
+        b.tick(0.0); // first fresh: reset #1
+        b.tick(0.5);
+        b.tick(2.0); // stale
+        feed(&mut b.world, 2.0);
+        b.tick(2.1); // back: reset #2
+        assert_eq!(resets.load(Ordering::SeqCst), 2);
+        assert_eq!(b.counters.ticks, 4);
+        assert_eq!(b.counters.commands, 3);
+    }
+}
