@@ -23,12 +23,13 @@ fn main() {
         let lvl = params.log_level.as_deref().unwrap_or("info");
         // RustDDS and ros2-client are chatty at info
         tracing_subscriber::EnvFilter::new(format!(
-            "{lvl},rustdds=warn,ros2_client=warn,rosout_raw=info"
+            "{lvl},rustdds=warn,ros2_client=warn,ros2_client::rosout={lvl}"
         ))
     });
     tracing_subscriber::fmt()
         .with_env_filter(filter)
         .with_writer(std::io::stderr)
+        .with_ansi(std::io::IsTerminal::is_terminal(&std::io::stderr()))
         .init();
     for w in &warnings {
         tracing::warn!("{w}");

@@ -1,0 +1,228 @@
+//! End-to-end over real DDS: the `robot_node` binary against a Rust test publisher on a
+//! private ROS_DOMAIN_ID (derived from the process id).
+
+use std::process::{Child, Command, Stdio};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+
+use msgs::topics::{self, Leaf};
+use msgs::{Bool, PoseStamped, Profile, RosMessage, Time, Twist};
+use ros2_client::dds::{Context, ContextOptions, Node, Publisher, Subscription};
+use ros2_client::{Name, NodeName, NodeOptions};
+
+fn domain() -> u16 {
+    // 20..=219: away from the default 0 and from neighbours' tests
+    20 + (std::process::id() % 200) as u16
+}
+
+fn publisher<M: RosMessage>(node: &mut Node, name: &str, profile: Profile) -> Publisher<M> {
+    let qos = profile.qos();
+    let topic = node
+        .create_topic(&Name::parse(name).unwrap(), M::type_name(), &qos)
+        .unwrap();
+    node.create_publisher(&topic, Some(qos)).unwrap()
+}
+
+struct Kill(Child);
+impl Drop for Kill {
+    fn drop(&mut self) {
+        let _ = self.0.kill();
+        let _ = self.0.wait();
+    }
+}
+
+#[test]
+fn bad_argument_exits_2_naming_it() {
+    let out = Command::new(env!("CARGO_BIN_EXE_robot_node"))
+        .args(["--ros-args", "-p", "k_speed:=fast"])
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(2));
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("k_speed"), "{err}");
+}
+
+#[test]
+fn commands_toward_machine_then_zero_when_own_pose_stale() {
+    let d = domain();
+    let ctx = Context::with_options(ContextOptions::new().domain_id(d)).unwrap();
+    let mut node = ctx
+        .new_node(
+            NodeName::new("/", &format!("test_pub_{}", std::process::id())).unwrap(),
+            NodeOptions::new().enable_rosout(false),
+        )
+        .unwrap();
+
+    let own_pose: Publisher<PoseStamped> =
+        publisher(&mut node, "/robot_0/pose", Profile::RobotStream);
+    let own_part: Publisher<Bool> = publisher(&mut node, "/robot_0/has_part", Profile::RobotStream);
+    let m_pose: Publisher<PoseStamped> =
+        publisher(&mut node, "/machine_0/pose", Profile::LatchedPose);
+    let m_ready: Publisher<Bool> =
+        publisher(&mut node, "/machine_0/part_ready", Profile::PartReady);
+    let s_pose: Publisher<PoseStamped> =
+        publisher(&mut node, "/storage_0/pose", Profile::LatchedPose);
+    let cmd_qos = Profile::RobotStream.qos();
+    let cmd_topic = node
+        .create_topic(
+            &Name::parse(&topics::robot("robot_0", Leaf::CmdVel).ros_name()).unwrap(),
+            Twist::type_name(),
+            &cmd_qos,
+        )
+        .unwrap();
+    let cmd: Subscription<Twist> = node.create_subscription(&cmd_topic, Some(cmd_qos)).unwrap();
+
+    let log_path = std::env::temp_dir().join(format!("robot_node_it_{}.log", std::process::id()));
+    let log = std::fs::File::create(&log_path).unwrap();
+    let child = Command::new(env!("CARGO_BIN_EXE_robot_node"))
+        .args([
+            "--ros-args",
+            "-r",
+            "__ns:=/robot_0",
+            "-p",
+            "control_rate_hz:=20",
+            "-p",
+            "stale_timeout_s:=1.0",
+            "-p",
+            "k_speed:=0.5",
+            "-p",
+            "discovery_period_s:=0.2",
+        ])
+        .env("ROS_DOMAIN_ID", d.to_string())
+        .env("RUST_LOG", "info,rustdds=warn,ros2_client=warn")
+        .stdout(Stdio::null())
+        .stderr(log)
+        .spawn()
+        .unwrap();
+    let mut child = Kill(child);
+    let show_log = || std::fs::read_to_string(&log_path).unwrap_or_default();
+
+    let own_alive = Arc::new(AtomicBool::new(true));
+    let running = Arc::new(AtomicBool::new(true));
+    let pub_thread = {
+        let own_alive = own_alive.clone();
+        let running = running.clone();
+        std::thread::spawn(move || {
+            let mut i = 0u64;
+            while running.load(Ordering::SeqCst) {
+                let st = Time::now();
+                if own_alive.load(Ordering::SeqCst) {
+                    own_pose
+                        .publish(PoseStamped::planar(st, "map", -0.5, -0.5))
+                        .ok();
+                    if i % 2 == 0 {
+                        // garbage that must be dropped, never reach the controller
+                        let mut bad = PoseStamped::planar(st, "map", f64::NAN, 0.0);
+                        own_pose.publish(bad.clone()).ok();
+                        bad.pose.position.x = 7.0;
+                        own_pose.publish(bad).ok();
+                    }
+                }
+                own_part.publish(Bool { data: false }).ok();
+                m_pose
+                    .publish(PoseStamped::planar(st, "map", 0.5, -0.5))
+                    .ok();
+                m_ready.publish(Bool { data: true }).ok();
+                s_pose
+                    .publish(PoseStamped::planar(st, "map", -0.5, 0.8))
+                    .ok();
+                i += 1;
+                std::thread::sleep(Duration::from_millis(50));
+            }
+        })
+    };
+
+    // Phase 1: a non-zero command toward the machine (+x) arrives.
+    let t0 = Instant::now();
+    let mut got: Option<Twist> = None;
+    while t0.elapsed() < Duration::from_secs(12) {
+        while let Ok(Some((t, _))) = cmd.take() {
+            assert!(
+                msgs::validate::twist(&t).is_ok(),
+                "non-finite cmd_vel {t:?}"
+            );
+            if t.linear.x > 0.0 {
+                got = Some(t);
+            }
+        }
+        if got.is_some() {
+            break;
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    let first = t0.elapsed();
+    let t =
+        got.unwrap_or_else(|| panic!("no cmd_vel toward the machine; node log:\n{}", show_log()));
+    assert!((t.linear.x - 0.5).abs() < 1e-9, "{t:?}");
+    assert_eq!(t.linear.y, 0.0);
+    eprintln!("first command toward machine after {first:?}");
+
+    // Phase 2: own pose stops; zero velocity follows within the stale timeout (+ slack).
+    own_alive.store(false, Ordering::SeqCst);
+    let stop_at = Instant::now();
+    let mut zero_after: Option<Duration> = None;
+    while stop_at.elapsed() < Duration::from_secs(5) {
+        while let Ok(Some((t, _))) = cmd.take() {
+            if t.linear.x == 0.0
+                && t.linear.y == 0.0
+                && stop_at.elapsed() > Duration::from_millis(200)
+            {
+                zero_after.get_or_insert(stop_at.elapsed());
+            }
+        }
+        if zero_after.is_some() {
+            break;
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    let z = zero_after.unwrap_or_else(|| {
+        panic!(
+            "no zero cmd_vel after own pose stopped; log:\n{}",
+            show_log()
+        )
+    });
+    eprintln!("zero command {z:?} after own pose stopped");
+    assert!(z >= Duration::from_millis(800), "zero too early: {z:?}");
+    assert!(z <= Duration::from_millis(2500), "zero too late: {z:?}");
+
+    // Phase 3: SIGTERM -> clean exit (status 0).
+    running.store(false, Ordering::SeqCst);
+    pub_thread.join().unwrap();
+    let pid = child.0.id();
+    let st = Command::new("kill")
+        .args(["-TERM", &pid.to_string()])
+        .status()
+        .unwrap();
+    assert!(st.success());
+    let t_kill = Instant::now();
+    let status = loop {
+        if let Some(s) = child.0.try_wait().unwrap() {
+            break s;
+        }
+        assert!(
+            t_kill.elapsed() < Duration::from_secs(5),
+            "robot_node did not exit on SIGTERM"
+        );
+        std::thread::sleep(Duration::from_millis(20));
+    };
+    let log = show_log();
+    assert!(status.success(), "exit status {status:?}; log:\n{log}");
+    assert!(log.contains("final counters"), "{log}");
+    assert!(
+        log.contains("NonFinite"),
+        "NaN poses were not reported as dropped:\n{log}"
+    );
+    assert!(
+        log.contains("OutOfRoom"),
+        "out-of-room poses were not reported:\n{log}"
+    );
+    eprintln!(
+        "{}",
+        log.lines()
+            .filter(|l| l.contains("counters"))
+            .collect::<Vec<_>>()
+            .join("\n")
+    );
+    std::fs::remove_file(&log_path).ok();
+}
