@@ -19,8 +19,15 @@ pub fn numeric_grad(x: &mut [f32], mut f: impl FnMut(&[f32]) -> f64) -> Vec<f64>
 /// Assert analytic ~ numeric: relative tolerance 2e-2 plus an absolute floor of 2e-3 of the
 /// tensor's largest gradient (f32 forward passes make tiny entries noisy).
 pub fn assert_grad_close(label: &str, analytic: &[f32], numeric: &[f64]) {
-    assert_eq!(analytic.len(), numeric.len(), "{label}: length");
     let scale = numeric.iter().fold(0.0f64, |m, x| m.max(x.abs()));
+    assert_grad_close_scaled(label, analytic, numeric, scale);
+}
+
+/// As [`assert_grad_close`] with the absolute floor taken from `scale` (e.g. the largest
+/// gradient of the whole network, since f32 noise in a finite difference scales with the
+/// loss, not with the tensor).
+pub fn assert_grad_close_scaled(label: &str, analytic: &[f32], numeric: &[f64], scale: f64) {
+    assert_eq!(analytic.len(), numeric.len(), "{label}: length");
     for (i, (&a, &n)) in analytic.iter().zip(numeric).enumerate() {
         let a = a as f64;
         let tol = 2e-2 * a.abs().max(n.abs()) + 2e-3 * scale.max(1e-2);
