@@ -7,13 +7,13 @@ use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 use msgs::topics::{self, Leaf};
-use msgs::{Bool, PoseStamped, Profile, RosMessage, Time, Twist};
+use msgs::{Bool, Clock, PoseStamped, Profile, RosMessage, Time, Twist};
 use ros2_client::dds::{Context, ContextOptions, Node, Publisher, Subscription};
 use ros2_client::{Name, NodeName, NodeOptions};
 
-fn domain() -> u16 {
+fn domain(offset: u32) -> u16 {
     // 20..=219: away from the default 0 and from neighbours' tests
-    20 + (std::process::id() % 200) as u16
+    20 + ((std::process::id() + offset) % 200) as u16
 }
 
 fn publisher<M: RosMessage>(node: &mut Node, name: &str, profile: Profile) -> Publisher<M> {
@@ -45,7 +45,7 @@ fn bad_argument_exits_2_naming_it() {
 
 #[test]
 fn commands_toward_machine_then_zero_when_own_pose_stale() {
-    let d = domain();
+    let d = domain(0);
     let ctx = Context::with_options(ContextOptions::new().domain_id(d)).unwrap();
     let mut node = ctx
         .new_node(
@@ -63,6 +63,10 @@ fn commands_toward_machine_then_zero_when_own_pose_stale() {
         publisher(&mut node, "/machine_0/part_ready", Profile::PartReady);
     let s_pose: Publisher<PoseStamped> =
         publisher(&mut node, "/storage_0/pose", Profile::LatchedPose);
+    let peer_pose: Publisher<PoseStamped> =
+        publisher(&mut node, "/robot_5/pose", Profile::RobotStream);
+    let peer_part: Publisher<Bool> =
+        publisher(&mut node, "/robot_5/has_part", Profile::RobotStream);
     let cmd_qos = Profile::RobotStream.qos();
     let cmd_topic = node
         .create_topic(
@@ -111,7 +115,7 @@ fn commands_toward_machine_then_zero_when_own_pose_stale() {
                     own_pose
                         .publish(PoseStamped::planar(st, "map", -0.5, -0.5))
                         .ok();
-                    if i % 2 == 0 {
+                    if i.is_multiple_of(2) {
                         // garbage that must be dropped, never reach the controller
                         let mut bad = PoseStamped::planar(st, "map", f64::NAN, 0.0);
                         own_pose.publish(bad.clone()).ok();
@@ -124,6 +128,10 @@ fn commands_toward_machine_then_zero_when_own_pose_stale() {
                     .publish(PoseStamped::planar(st, "map", 0.5, -0.5))
                     .ok();
                 m_ready.publish(Bool { data: true }).ok();
+                peer_pose
+                    .publish(PoseStamped::planar(st, "map", 0.9, 0.9))
+                    .ok();
+                peer_part.publish(Bool { data: true }).ok();
                 s_pose
                     .publish(PoseStamped::planar(st, "map", -0.5, 0.8))
                     .ok();
@@ -209,6 +217,18 @@ fn commands_toward_machine_then_zero_when_own_pose_stale() {
     let log = show_log();
     assert!(status.success(), "exit status {status:?}; log:\n{log}");
     assert!(log.contains("final counters"), "{log}");
+    for t in [
+        "/machine_0/pose",
+        "/machine_0/part_ready",
+        "/storage_0/pose",
+        "/robot_5/pose",
+        "/robot_5/has_part",
+    ] {
+        assert!(
+            log.contains(&format!("discovered {t}")),
+            "{t} not discovered:\n{log}"
+        );
+    }
     assert!(
         log.contains("NonFinite"),
         "NaN poses were not reported as dropped:\n{log}"
@@ -225,4 +245,94 @@ fn commands_toward_machine_then_zero_when_own_pose_stale() {
             .join("\n")
     );
     std::fs::remove_file(&log_path).ok();
+}
+
+#[test]
+fn sim_time_ticks_follow_clock() {
+    let d = domain(101);
+    let ctx = Context::with_options(ContextOptions::new().domain_id(d)).unwrap();
+    let mut node = ctx
+        .new_node(
+            NodeName::new("/", &format!("test_clock_{}", std::process::id())).unwrap(),
+            NodeOptions::new().enable_rosout(false),
+        )
+        .unwrap();
+    let clock: Publisher<Clock> = publisher(&mut node, "/clock", Profile::Clock);
+    let own_pose: Publisher<PoseStamped> =
+        publisher(&mut node, "/robot_1/pose", Profile::RobotStream);
+    let own_part: Publisher<Bool> = publisher(&mut node, "/robot_1/has_part", Profile::RobotStream);
+    let s_pose: Publisher<PoseStamped> =
+        publisher(&mut node, "/storage_3/pose", Profile::LatchedPose);
+    let cmd_qos = Profile::RobotStream.qos();
+    let cmd_topic = node
+        .create_topic(
+            &Name::parse("/robot_1/cmd_vel").unwrap(),
+            Twist::type_name(),
+            &cmd_qos,
+        )
+        .unwrap();
+    let cmd: Subscription<Twist> = node.create_subscription(&cmd_topic, Some(cmd_qos)).unwrap();
+
+    let child = Command::new(env!("CARGO_BIN_EXE_robot_node"))
+        .args([
+            "--ros-args",
+            "-r",
+            "__ns:=/robot_1",
+            "-p",
+            "use_sim_time:=true",
+            "-p",
+            "control_rate_hz:=10",
+            "-p",
+            "discovery_period_s:=0.2",
+        ])
+        .env("ROS_DOMAIN_ID", d.to_string())
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .spawn()
+        .unwrap();
+    let _child = Kill(child);
+
+    // Robot has a part, storage is up (+y): expect linear.y = +0.5 while the clock runs.
+    let mut sim_t = 0.0f64;
+    let mut up = 0usize;
+    let t0 = Instant::now();
+    while t0.elapsed() < Duration::from_secs(10) && up < 5 {
+        sim_t += 0.05;
+        let st = Time::from_secs_f64(sim_t);
+        clock.publish(Clock { clock: st }).ok();
+        own_pose
+            .publish(PoseStamped::planar(st, "map", 0.0, -0.5))
+            .ok();
+        own_part.publish(Bool { data: true }).ok();
+        s_pose
+            .publish(PoseStamped::planar(st, "map", 0.0, 1.0))
+            .ok();
+        while let Ok(Some((t, _))) = cmd.take() {
+            if t.linear.y > 0.4 && t.linear.x == 0.0 {
+                up += 1;
+            }
+        }
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    assert!(up >= 5, "only {up} commands toward the storage in sim time");
+    // Clock stops (data keeps flowing): no more ticks, so no more commands.
+    std::thread::sleep(Duration::from_millis(200));
+    while let Ok(Some(_)) = cmd.take() {}
+    let quiet = Instant::now();
+    let mut n = 0;
+    while quiet.elapsed() < Duration::from_millis(800) {
+        let st = Time::from_secs_f64(sim_t);
+        own_pose
+            .publish(PoseStamped::planar(st, "map", 0.0, -0.5))
+            .ok();
+        own_part.publish(Bool { data: true }).ok();
+        s_pose
+            .publish(PoseStamped::planar(st, "map", 0.0, 1.0))
+            .ok();
+        while let Ok(Some(_)) = cmd.take() {
+            n += 1;
+        }
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    assert_eq!(n, 0, "commands while /clock was stopped");
 }
