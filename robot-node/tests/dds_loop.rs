@@ -24,6 +24,33 @@ fn publisher<M: RosMessage>(node: &mut Node, name: &str, profile: Profile) -> Pu
     node.create_publisher(&topic, Some(qos)).unwrap()
 }
 
+/// A message with the PoseStamped type name but a 1-byte body: must be dropped as undecodable.
+#[derive(serde::Serialize, serde::Deserialize)]
+struct Short {
+    data: bool,
+}
+
+fn wait_for(
+    cmd: &Subscription<Twist>,
+    within: Duration,
+    pred: impl Fn(&Twist) -> bool,
+) -> Option<Duration> {
+    let t0 = Instant::now();
+    while t0.elapsed() < within {
+        while let Ok(Some((t, _))) = cmd.take() {
+            assert!(
+                msgs::validate::twist(&t).is_ok(),
+                "non-finite cmd_vel {t:?}"
+            );
+            if pred(&t) {
+                return Some(t0.elapsed());
+            }
+        }
+        std::thread::sleep(Duration::from_millis(10));
+    }
+    None
+}
+
 struct Kill(Child);
 impl Drop for Kill {
     fn drop(&mut self) {
@@ -67,6 +94,17 @@ fn commands_toward_machine_then_zero_when_own_pose_stale() {
         publisher(&mut node, "/robot_5/pose", Profile::RobotStream);
     let peer_part: Publisher<Bool> =
         publisher(&mut node, "/robot_5/has_part", Profile::RobotStream);
+    let short_pose: Publisher<Short> = {
+        let qos = Profile::RobotStream.qos();
+        let topic = node
+            .create_topic(
+                &Name::parse("/robot_0/pose").unwrap(),
+                PoseStamped::type_name(),
+                &qos,
+            )
+            .unwrap();
+        node.create_publisher(&topic, Some(qos)).unwrap()
+    };
     let cmd_qos = Profile::RobotStream.qos();
     let cmd_topic = node
         .create_topic(
@@ -121,6 +159,7 @@ fn commands_toward_machine_then_zero_when_own_pose_stale() {
                         own_pose.publish(bad.clone()).ok();
                         bad.pose.position.x = 7.0;
                         own_pose.publish(bad).ok();
+                        short_pose.publish(Short { data: true }).ok();
                     }
                 }
                 own_part.publish(Bool { data: false }).ok();
@@ -194,7 +233,12 @@ fn commands_toward_machine_then_zero_when_own_pose_stale() {
     assert!(z >= Duration::from_millis(800), "zero too early: {z:?}");
     assert!(z <= Duration::from_millis(2500), "zero too late: {z:?}");
 
-    // Phase 3: SIGTERM -> clean exit (status 0).
+    // Phase 3: own pose comes back -> moving again; then SIGTERM -> a zero command and a
+    // clean exit (status 0).
+    own_alive.store(true, Ordering::SeqCst);
+    let back = wait_for(&cmd, Duration::from_secs(5), |t| t.linear.x > 0.4)
+        .unwrap_or_else(|| panic!("no command after own pose returned; log:\n{}", show_log()));
+    eprintln!("moving again {back:?} after own pose returned");
     running.store(false, Ordering::SeqCst);
     pub_thread.join().unwrap();
     let pid = child.0.id();
@@ -204,7 +248,13 @@ fn commands_toward_machine_then_zero_when_own_pose_stale() {
         .unwrap();
     assert!(st.success());
     let t_kill = Instant::now();
+    // read cmd_vel while the node shuts down (samples of a writer that is gone may be
+    // discarded by the reader)
+    let mut last = None;
     let status = loop {
+        while let Ok(Some((t, _))) = cmd.take() {
+            last = Some(t);
+        }
         if let Some(s) = child.0.try_wait().unwrap() {
             break s;
         }
@@ -212,10 +262,20 @@ fn commands_toward_machine_then_zero_when_own_pose_stale() {
             t_kill.elapsed() < Duration::from_secs(5),
             "robot_node did not exit on SIGTERM"
         );
-        std::thread::sleep(Duration::from_millis(20));
+        std::thread::sleep(Duration::from_millis(5));
     };
     let log = show_log();
     assert!(status.success(), "exit status {status:?}; log:\n{log}");
+    // the last command received is the zero published on shutdown
+    assert_eq!(
+        last,
+        Some(Twist::zero()),
+        "no zero cmd_vel on shutdown; log:\n{log}"
+    );
+    assert!(
+        log.contains("Decode"),
+        "undecodable poses were not reported:\n{log}"
+    );
     assert!(log.contains("final counters"), "{log}");
     for t in [
         "/machine_0/pose",
