@@ -19,11 +19,11 @@ pub mod mlp_base;
 pub mod nn;
 
 pub use actor::{Actor, ActorLossStats, PpoActorConfig};
-// pub use checkpoint::CheckpointError;
+pub use checkpoint::{CheckpointError, CheckpointMeta};
 pub use config::{ArchConfig, FlatLayoutConfig, ModelKind};
 pub use critic::{Critic, ValueLossConfig, ValueLossStats};
 pub use error::PolicyError;
-// inference pending
+pub use inference::{ActMode, Policy, PolicyState};
 
 #[cfg(test)]
 mod net_tests;
