@@ -1,1 +1,33 @@
-fn main() {}
+//! `tending`: the command line of the project (simulate, benchmark; train, eval and the
+//! fleet join as their crates land).
+
+mod bench_sim;
+mod render;
+mod sim_cmd;
+mod stats;
+
+use anyhow::Result;
+use clap::{Parser, Subcommand};
+
+#[derive(Parser)]
+#[command(name = "tending", version, about = "Decentralized multi-robot machine tending (SMAPPO)")]
+struct Cli {
+    #[command(subcommand)]
+    cmd: Cmd,
+}
+
+#[derive(Subcommand)]
+enum Cmd {
+    /// Run episodes of a setup with a scripted policy and print the paper's metrics.
+    Sim(sim_cmd::SimArgs),
+    /// Measure simulator throughput (agent-steps/s) and write a Markdown report.
+    BenchSim(bench_sim::BenchArgs),
+}
+
+fn main() -> Result<()> {
+    let cli = Cli::parse();
+    match cli.cmd {
+        Cmd::Sim(a) => sim_cmd::run(a),
+        Cmd::BenchSim(a) => bench_sim::run(a),
+    }
+}

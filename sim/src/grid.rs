@@ -6,6 +6,10 @@
 //! interaction distance is exact, allocation-free after the first step, and keeps the cost
 //! of a step linear in the robot count.
 
+/// Up to this many robots, all pairs are visited directly (measured faster than the grid
+/// walk, which visits every cell, at 14 robots in a 14x14 grid).
+const BRUTE_FORCE_MAX: usize = 32;
+
 #[derive(Debug, Clone, Default)]
 pub(crate) struct Grid {
     cell: f32,
@@ -66,9 +70,19 @@ impl Grid {
         self.start[0] = 0;
     }
 
-    /// Calls `f(i, j)` once for every pair i < j of robots in the same or adjacent cells.
+    /// Calls `f(i, j)` once for every pair i < j of robots in the same or adjacent cells
+    /// (for small fleets: every pair, which is cheaper than walking mostly empty cells).
     #[inline]
     pub fn for_each_pair(&self, mut f: impl FnMut(usize, usize)) {
+        let n = self.cell_of.len();
+        if n <= BRUTE_FORCE_MAX {
+            for i in 0..n {
+                for j in i + 1..n {
+                    f(i, j);
+                }
+            }
+            return;
+        }
         let d = self.dim;
         for cy in 0..d {
             for cx in 0..d {
@@ -109,6 +123,19 @@ impl Grid {
 mod tests {
     use super::*;
     use rand::{Rng, SeedableRng};
+
+    #[test]
+    fn small_fleets_visit_all_pairs_once() {
+        let pos: Vec<[f32; 2]> = (0..5).map(|i| [i as f32 * 0.3 - 0.6, 0.0]).collect();
+        let mut g = Grid::new(2.3, 0.1);
+        g.rebuild(&pos);
+        let mut n = 0;
+        g.for_each_pair(|i, j| {
+            assert!(i < j);
+            n += 1;
+        });
+        assert_eq!(n, 10);
+    }
 
     #[test]
     fn finds_every_close_pair_exactly_once() {
