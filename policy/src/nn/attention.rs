@@ -10,6 +10,7 @@
 //!
 //! With S = 0 the attention result is a zero vector, so the output is `out_proj.bias`.
 
+use super::dot;
 use super::gemm::{gemm, rm, tr, View};
 use super::init::Init;
 use super::linear::{Linear, LinearConfig};
@@ -44,11 +45,6 @@ pub struct MhaCache {
     d_u: Vec<f32>,
     d_q: Vec<f32>,
     ds: Vec<f32>,
-}
-
-#[inline]
-fn dot(a: &[f32], b: &[f32]) -> f32 {
-    a.iter().zip(b).map(|(x, y)| x * y).sum()
 }
 
 #[inline]
