@@ -5,7 +5,9 @@
 //! Only standard types cross the wire, so stock ROS 2 tools read everything.
 
 pub mod cdr;
+pub mod dds;
 pub mod qos;
+pub mod rosargs;
 pub mod schema;
 pub mod topics;
 pub mod types;

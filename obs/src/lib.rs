@@ -14,6 +14,7 @@
 //! one GEMM per group.
 
 mod flat;
+pub mod greedy;
 
 pub use flat::{FlatLayout, FLAT_PAD};
 

@@ -15,6 +15,11 @@
 
 use std::path::PathBuf;
 
+pub use msgs::rosargs::{
+    key_matches, load_params_file, parse_params_yaml, parse_ros_args, ArgError, ParamValue,
+};
+use msgs::rosargs::{num, positive};
+
 /// Default node name.
 pub const DEFAULT_NODE_NAME: &str = "robot_node";
 
@@ -47,6 +52,16 @@ pub struct Params {
     /// `--log-level`, if given (tracing filter directive).
     pub log_level: Option<String>,
     pub enable_rosout: bool,
+    /// Body sizes the greedy controller plans with (the fleet's; the launcher passes the
+    /// simulator's values for the setup). Defaults: the unscaled base sizes.
+    pub robot_radius: f64,
+    pub machine_half: [f64; 2],
+    pub storage_half: [f64; 2],
+    /// Lockstep with the sim bridge (docs/adr/0001-lockstep.md): act once per simulator
+    /// state, when own and all expected entity data of that state's stamp are in (or
+    /// after `lockstep_wait_s`), and tag cmd_vel with the state's stamp. Implies sim time.
+    pub lockstep: bool,
+    pub lockstep_wait_s: f64,
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -73,6 +88,11 @@ impl Default for Params {
             discovery_period_s: 0.5,
             log_level: None,
             enable_rosout: true,
+            robot_radius: 0.08,
+            machine_half: [0.12, 0.12],
+            storage_half: [0.15, 0.08],
+            lockstep: false,
+            lockstep_wait_s: 0.5,
         }
     }
 }
@@ -91,66 +111,14 @@ impl Params {
     }
 }
 
-#[derive(Debug, Clone, PartialEq, thiserror::Error)]
-pub enum ArgError {
-    #[error("argument `{arg}`: {msg}")]
-    Bad { arg: String, msg: String },
-    #[error("argument `{0}` needs a value")]
-    MissingValue(String),
-    #[error("unknown argument `{0}` (robot_node takes only ROS 2 arguments after --ros-args)")]
-    Unknown(String),
-    #[error("parameter `{name}`: {msg}")]
-    Param { name: String, msg: String },
-    #[error("params file `{path}`: {msg}")]
-    ParamsFile { path: String, msg: String },
-    #[error("environment variable ROS_DOMAIN_ID=`{0}`: expected an integer 0..=232")]
-    DomainId(String),
-    #[error("help requested")]
-    Help,
-}
-
 pub const USAGE: &str = "usage: robot_node [--ros-args -r __ns:=/robot_N [-r __node:=NAME] \
 [-p NAME:=VALUE]... [--params-file FILE.yaml]... [--log-level LEVEL]]
 parameters: policy (path), controller (greedy|policy), control_rate_hz (10), use_sim_time (false),
             k_speed (0.5), stale_timeout_s (1.0), static_stale_timeout_s (= stale_timeout_s, <=0 off),
-            room_margin (0.25), stats_period_s (10), discovery_period_s (0.5)
+            room_margin (0.25), stats_period_s (10), discovery_period_s (0.5),
+            robot_radius (0.08), machine_half_x/_y (0.12), storage_half_x (0.15), storage_half_y (0.08),
+            lockstep (false; implies use_sim_time), lockstep_wait_s (0.5)
 environment: ROS_DOMAIN_ID (0)";
-
-/// A typed parameter value (YAML scalar).
-#[derive(Debug, Clone, PartialEq)]
-pub enum ParamValue {
-    Bool(bool),
-    Int(i64),
-    Double(f64),
-    Str(String),
-    Other(String),
-}
-
-impl ParamValue {
-    /// Parse a `-p` value as ROS does: YAML scalar typing.
-    pub fn parse_cli(s: &str) -> Self {
-        match serde_yaml::from_str::<serde_yaml::Value>(s) {
-            Ok(v) => Self::from_yaml(&v),
-            Err(_) => ParamValue::Str(s.to_string()),
-        }
-    }
-    fn from_yaml(v: &serde_yaml::Value) -> Self {
-        use serde_yaml::Value as Y;
-        match v {
-            Y::Bool(b) => ParamValue::Bool(*b),
-            Y::Number(n) => {
-                if let Some(i) = n.as_i64() {
-                    ParamValue::Int(i)
-                } else {
-                    ParamValue::Double(n.as_f64().unwrap_or(f64::NAN))
-                }
-            }
-            Y::String(s) => ParamValue::Str(s.clone()),
-            Y::Null => ParamValue::Str(String::new()),
-            other => ParamValue::Other(serde_yaml::to_string(other).unwrap_or_default()),
-        }
-    }
-}
 
 /// Parse the process arguments (without argv\[0\]) and `ROS_DOMAIN_ID`.
 pub fn parse<I, S>(args: I, ros_domain_id: Option<&str>) -> Result<(Params, Vec<String>), ArgError>
@@ -158,97 +126,18 @@ where
     I: IntoIterator<Item = S>,
     S: AsRef<str>,
 {
-    let args: Vec<String> = args.into_iter().map(|s| s.as_ref().to_string()).collect();
-    let mut p = Params::default();
-    let mut warnings = Vec::new();
-    if let Some(d) = ros_domain_id {
-        let d = d.trim();
-        if !d.is_empty() {
-            p.domain_id = d
-                .parse::<u16>()
-                .ok()
-                .filter(|v| *v <= 232)
-                .ok_or_else(|| ArgError::DomainId(d.to_string()))?;
-        }
-    }
-
-    let mut overrides: Vec<(String, ParamValue)> = Vec::new();
-    let mut files: Vec<String> = Vec::new();
-    let mut in_ros = false;
-    let mut i = 0;
-    let next = |i: &mut usize, flag: &str| -> Result<String, ArgError> {
-        *i += 1;
-        args.get(*i)
-            .cloned()
-            .ok_or_else(|| ArgError::MissingValue(flag.to_string()))
+    let ra = parse_ros_args(args, ros_domain_id, DEFAULT_NODE_NAME)?;
+    let mut p = Params {
+        namespace: ra.namespace,
+        node_name: ra.node_name,
+        domain_id: ra.domain_id,
+        log_level: ra.log_level,
+        enable_rosout: ra.enable_rosout,
+        ..Params::default()
     };
-    while i < args.len() {
-        let a = args[i].as_str();
-        if !in_ros {
-            match a {
-                "--ros-args" => in_ros = true,
-                "-h" | "--help" => return Err(ArgError::Help),
-                _ => return Err(ArgError::Unknown(a.to_string())),
-            }
-        } else {
-            match a {
-                "--" => in_ros = false,
-                "--ros-args" => {}
-                "-r" | "--remap" => {
-                    let v = next(&mut i, a)?;
-                    apply_remap(&mut p, &v)?;
-                }
-                "-p" | "--param" => {
-                    let v = next(&mut i, a)?;
-                    let (name, value) = v.split_once(":=").ok_or_else(|| ArgError::Bad {
-                        arg: format!("{a} {v}"),
-                        msg: "expected NAME:=VALUE".into(),
-                    })?;
-                    if name.is_empty() {
-                        return Err(ArgError::Bad {
-                            arg: format!("{a} {v}"),
-                            msg: "empty parameter name".into(),
-                        });
-                    }
-                    overrides.push((name.to_string(), ParamValue::parse_cli(value)));
-                }
-                "--params-file" => files.push(next(&mut i, a)?),
-                "--log-level" => {
-                    let v = next(&mut i, a)?;
-                    p.log_level =
-                        Some(ros_log_level_to_filter(&v).ok_or_else(|| ArgError::Bad {
-                            arg: format!("--log-level {v}"),
-                            msg: "expected debug, info, warn, error or fatal".into(),
-                        })?);
-                }
-                "-e" | "--enclave" => {
-                    next(&mut i, a)?;
-                }
-                "--enable-rosout-logs" => p.enable_rosout = true,
-                "--disable-rosout-logs" => p.enable_rosout = false,
-                "--enable-stdout-logs"
-                | "--disable-stdout-logs"
-                | "--enable-external-lib-logs"
-                | "--disable-external-lib-logs" => {}
-                "-h" | "--help" => return Err(ArgError::Help),
-                _ => return Err(ArgError::Unknown(a.to_string())),
-            }
-        }
-        i += 1;
-    }
-
-    // params files first (in order), then -p overrides
-    let mut values: Vec<(String, ParamValue, String)> = Vec::new();
-    for f in &files {
-        for (n, v) in load_params_file(f, &p.namespace, &p.node_name)? {
-            values.push((n, v, format!("params file {f}")));
-        }
-    }
-    for (n, v) in overrides {
-        values.push((n, v, "-p".into()));
-    }
+    let mut warnings = Vec::new();
     let mut set: Vec<String> = Vec::new();
-    for (name, value, origin) in values {
+    for (name, value, origin) in ra.values {
         match apply_param(&mut p, &name, &value)? {
             Applied::Yes => set.push(name),
             Applied::Unknown => {
@@ -257,6 +146,9 @@ where
         }
     }
     let was_set = |n: &str| set.iter().any(|s| s == n);
+    if p.lockstep {
+        p.use_sim_time = true;
+    }
     if !was_set("static_stale_timeout_s") {
         p.static_stale_timeout_s = p.stale_timeout_s;
     }
@@ -270,94 +162,6 @@ where
 enum Applied {
     Yes,
     Unknown,
-}
-
-fn apply_remap(p: &mut Params, v: &str) -> Result<(), ArgError> {
-    let bad = |msg: &str| ArgError::Bad {
-        arg: format!("-r {v}"),
-        msg: msg.to_string(),
-    };
-    let (from, to) = v.split_once(":=").ok_or_else(|| bad("expected FROM:=TO"))?;
-    // `node_name:__ns:=...` targets one node; we are the only node in this process
-    let from = match from.split_once(':') {
-        Some((node, rest)) if node == p.node_name || node == DEFAULT_NODE_NAME => rest,
-        Some(_) => return Ok(()), // remap for another node: not ours
-        None => from,
-    };
-    match from {
-        "__ns" => {
-            let ns = to.trim_end_matches('/');
-            let ns = if ns.is_empty() { "/" } else { ns };
-            if !ns.starts_with('/') {
-                return Err(bad("namespace must be absolute (start with /)"));
-            }
-            if ns != "/" {
-                for seg in ns[1..].split('/') {
-                    if !valid_token(seg) {
-                        return Err(bad(&format!("invalid namespace segment `{seg}`")));
-                    }
-                }
-            }
-            p.namespace = ns.to_string();
-        }
-        "__node" | "__name" => {
-            if !valid_token(to) {
-                return Err(bad("invalid node name"));
-            }
-            p.node_name = to.to_string();
-        }
-        _ => {
-            return Err(bad(
-                "only __ns and __node remaps are supported (topic names are fixed by the contract)",
-            ))
-        }
-    }
-    Ok(())
-}
-
-fn valid_token(seg: &str) -> bool {
-    !seg.is_empty()
-        && (seg.as_bytes()[0].is_ascii_alphabetic() || seg.as_bytes()[0] == b'_')
-        && seg.bytes().all(|b| b.is_ascii_alphanumeric() || b == b'_')
-        && !seg.contains("__")
-}
-
-fn ros_log_level_to_filter(v: &str) -> Option<String> {
-    // `--log-level debug` or `--log-level robot_node:=debug`
-    let lvl = v.rsplit(":=").next().unwrap_or(v).to_ascii_lowercase();
-    Some(
-        match lvl.as_str() {
-            "debug" => "debug",
-            "info" => "info",
-            "warn" | "warning" => "warn",
-            "error" | "fatal" => "error",
-            _ => return None,
-        }
-        .to_string(),
-    )
-}
-
-fn num(name: &str, v: &ParamValue) -> Result<f64, ArgError> {
-    match v {
-        ParamValue::Int(i) => Ok(*i as f64),
-        ParamValue::Double(d) => Ok(*d),
-        other => Err(ArgError::Param {
-            name: name.into(),
-            msg: format!("expected a number, got {other:?}"),
-        }),
-    }
-}
-
-fn positive(name: &str, v: &ParamValue) -> Result<f64, ArgError> {
-    let x = num(name, v)?;
-    if x.is_finite() && x > 0.0 {
-        Ok(x)
-    } else {
-        Err(ArgError::Param {
-            name: name.into(),
-            msg: format!("must be a finite number > 0, got {x}"),
-        })
-    }
 }
 
 fn apply_param(p: &mut Params, name: &str, v: &ParamValue) -> Result<Applied, ArgError> {
@@ -426,125 +230,25 @@ fn apply_param(p: &mut Params, name: &str, v: &ParamValue) -> Result<Applied, Ar
             p.room_margin = x;
         }
         "stats_period_s" => p.stats_period_s = positive(name, v)?,
+        "robot_radius" => p.robot_radius = positive(name, v)?,
+        "machine_half_x" => p.machine_half[0] = positive(name, v)?,
+        "machine_half_y" => p.machine_half[1] = positive(name, v)?,
+        "storage_half_x" => p.storage_half[0] = positive(name, v)?,
+        "storage_half_y" => p.storage_half[1] = positive(name, v)?,
+        "lockstep_wait_s" => p.lockstep_wait_s = positive(name, v)?,
+        "lockstep" => match v {
+            ParamValue::Bool(b) => p.lockstep = *b,
+            other => {
+                return Err(ArgError::Param {
+                    name: name.into(),
+                    msg: format!("expected true or false, got {other:?}"),
+                })
+            }
+        },
         "discovery_period_s" => p.discovery_period_s = positive(name, v)?,
         _ => return Ok(Applied::Unknown),
     }
     Ok(Applied::Yes)
-}
-
-/// Does a params-file key (`/**`, `robot_node`, `/robot_3/robot_node`, `/*/robot_node`)
-/// select this node?
-pub fn key_matches(key: &str, namespace: &str, node_name: &str) -> bool {
-    let fq: Vec<&str> = namespace
-        .split('/')
-        .filter(|s| !s.is_empty())
-        .chain(std::iter::once(node_name))
-        .collect();
-    let pat: Vec<&str> = key.split('/').filter(|s| !s.is_empty()).collect();
-    if !key.starts_with('/') && pat.len() == 1 {
-        // a bare node name matches in any namespace
-        return pat[0] == node_name || pat[0] == "**" || pat[0] == "*";
-    }
-    fn m(pat: &[&str], name: &[&str]) -> bool {
-        match pat.first() {
-            None => name.is_empty(),
-            Some(&"**") => (0..=name.len()).any(|k| m(&pat[1..], &name[k..])),
-            Some(&"*") => !name.is_empty() && m(&pat[1..], &name[1..]),
-            Some(seg) => !name.is_empty() && *seg == name[0] && m(&pat[1..], &name[1..]),
-        }
-    }
-    m(&pat, &fq)
-}
-
-/// Parameters for this node from a ROS 2 params YAML file.
-pub fn load_params_file(
-    path: &str,
-    namespace: &str,
-    node_name: &str,
-) -> Result<Vec<(String, ParamValue)>, ArgError> {
-    let text = std::fs::read_to_string(path).map_err(|e| ArgError::ParamsFile {
-        path: path.into(),
-        msg: e.to_string(),
-    })?;
-    parse_params_yaml(&text, namespace, node_name).map_err(|msg| ArgError::ParamsFile {
-        path: path.into(),
-        msg,
-    })
-}
-
-/// Parse params-file text; see [`load_params_file`].
-pub fn parse_params_yaml(
-    text: &str,
-    namespace: &str,
-    node_name: &str,
-) -> Result<Vec<(String, ParamValue)>, String> {
-    use serde_yaml::Value as Y;
-    let doc: Y = serde_yaml::from_str(text).map_err(|e| e.to_string())?;
-    let Y::Mapping(top) = doc else {
-        return Err("top level must be a mapping of node names".into());
-    };
-    let mut out = Vec::new();
-    fn flatten(prefix: &str, v: &Y, out: &mut Vec<(String, ParamValue)>) {
-        match v {
-            Y::Mapping(m) => {
-                for (k, v) in m {
-                    let k = key_str(k);
-                    let name = if prefix.is_empty() {
-                        k
-                    } else {
-                        format!("{prefix}.{k}")
-                    };
-                    flatten(&name, v, out);
-                }
-            }
-            other => out.push((prefix.to_string(), ParamValue::from_yaml(other))),
-        }
-    }
-    fn key_str(k: &Y) -> String {
-        match k {
-            Y::String(s) => s.clone(),
-            other => serde_yaml::to_string(other)
-                .unwrap_or_default()
-                .trim()
-                .to_string(),
-        }
-    }
-    fn walk(
-        path: &str,
-        m: &serde_yaml::Mapping,
-        ns: &str,
-        node: &str,
-        out: &mut Vec<(String, ParamValue)>,
-    ) -> Result<(), String> {
-        for (k, v) in m {
-            let k = key_str(k);
-            if k == "ros__parameters" {
-                if key_matches(path, ns, node) {
-                    if !v.is_mapping() && !v.is_null() {
-                        return Err(format!("`{path}: ros__parameters` must be a mapping"));
-                    }
-                    flatten("", v, out);
-                }
-                continue;
-            }
-            let sub = if path.is_empty() {
-                k.clone()
-            } else {
-                format!(
-                    "{}/{}",
-                    path.trim_end_matches('/'),
-                    k.trim_start_matches('/')
-                )
-            };
-            match v {
-                Y::Mapping(inner) => walk(&sub, inner, ns, node, out)?,
-                _ => return Err(format!("key `{sub}`: expected a mapping")),
-            }
-        }
-        Ok(())
-    }
-    walk("", &top, namespace, node_name, &mut out)?;
-    Ok(out)
 }
 
 #[cfg(test)]

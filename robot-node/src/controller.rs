@@ -1,11 +1,11 @@
 //! Controllers: observation in, planar velocity (m/s, map frame) out.
 //!
-//! The learned SMAPPO policy (crate `policy`, not integrated yet) will sit behind the same
-//! [`Controller`] trait: `Policy::load(path)`, `new_state()` on [`Controller::reset`], and
-//! `act(&ObsBatch, &mut state, mode)` giving an action index that [`action_velocity`]
-//! turns into a velocity. Until then [`GreedyController`] drives the robot.
+//! - [`PolicyController`]: the learned SMAPPO/MAPPO policy (crate `policy`, inference only:
+//!   no simulator, no trainer), GRU state kept per robot, greedy argmax;
+//! - [`GreedyController`]: the scripted baseline, the same function as the simulator's.
 
-use obs::{ObsBatch, MACHINE_DIM, STORAGE_DIM};
+use obs::greedy::GreedyParams;
+use obs::ObsBatch;
 
 /// The paper's discrete actions (section III): holonomic velocity K_speed on one axis.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -52,22 +52,17 @@ pub trait Controller: Send {
     fn name(&self) -> &'static str;
 }
 
-/// Scripted baseline: without a part, go to the nearest machine whose part is ready
-/// (or, if none is ready, the nearest machine, to wait there); with a part, go to the
-/// nearest storage. Moves along the axis with the larger offset at K_speed (the 5-action
-/// space of the policy); stays when within `deadband` metres on both axes.
+/// Scripted baseline: [`obs::greedy::greedy_action`], the very function the simulator's
+/// offline greedy episodes run (`sim::baselines::greedy_action` wraps it), so a fleet of
+/// greedy robot nodes on the sim bridge reproduces an offline episode step for step.
 #[derive(Debug, Clone)]
 pub struct GreedyController {
-    pub k_speed: f32,
-    pub deadband: f32,
+    pub params: GreedyParams,
 }
 
 impl GreedyController {
-    pub fn new(k_speed: f32) -> Self {
-        Self {
-            k_speed,
-            deadband: 0.02,
-        }
+    pub fn new(params: GreedyParams) -> Self {
+        Self { params }
     }
 
     /// The discrete action for row 0 of `obs`.
@@ -78,56 +73,100 @@ impl GreedyController {
             obs.rows
         );
         obs.validate()?;
-        let has_part = obs.own_row(0)[2] == 1.0;
-        let target = if has_part {
-            nearest(
-                obs.storages_row(0)
-                    .chunks_exact(STORAGE_DIM)
-                    .map(|c| [c[0], c[1]]),
-            )
-        } else {
-            let machines: Vec<([f32; 2], bool)> = obs
-                .machines_row(0)
-                .chunks_exact(MACHINE_DIM)
-                .map(|c| ([c[0], c[1]], c[2] == 1.0))
-                .collect();
-            nearest(machines.iter().filter(|m| m.1).map(|m| m.0))
-                .or_else(|| nearest(machines.iter().map(|m| m.0)))
-        };
-        let Some([dx, dy]) = target else {
-            return Ok(Action::Stay);
-        };
-        Ok(if dx.abs() <= self.deadband && dy.abs() <= self.deadband {
-            Action::Stay
-        } else if dx.abs() >= dy.abs() {
-            if dx > 0.0 {
-                Action::Right
-            } else {
-                Action::Left
-            }
-        } else if dy > 0.0 {
-            Action::Up
-        } else {
-            Action::Down
-        })
+        let a = obs::greedy::greedy_action(
+            obs.own_row(0),
+            obs.machines_row(0),
+            obs.storages_row(0),
+            obs.peers_row(0),
+            &self.params,
+        );
+        Action::from_index(a as usize).ok_or_else(|| anyhow::anyhow!("greedy gave action {a}"))
     }
-}
-
-fn nearest(rel: impl Iterator<Item = [f32; 2]>) -> Option<[f32; 2]> {
-    rel.min_by(|a, b| {
-        let da = a[0] * a[0] + a[1] * a[1];
-        let db = b[0] * b[0] + b[1] * b[1];
-        da.total_cmp(&db)
-    })
 }
 
 impl Controller for GreedyController {
     fn reset(&mut self) {}
     fn act(&mut self, obs: &ObsBatch) -> anyhow::Result<[f32; 2]> {
-        Ok(action_velocity(self.action(obs)?, self.k_speed))
+        Ok(action_velocity(self.action(obs)?, self.params.k_speed))
     }
     fn name(&self) -> &'static str {
         "greedy"
+    }
+}
+
+/// The learned policy (SMAPPO or MAPPO actor from a checkpoint) behind [`Controller`]:
+/// keeps the GRU state, acts greedily (argmax) and resets the state on [`Controller::reset`]
+/// (own data stale then back, sim time going backwards).
+pub struct PolicyController {
+    policy: policy::Policy,
+    state: policy::PolicyState,
+    pub k_speed: f32,
+}
+
+impl PolicyController {
+    /// Load a checkpoint. `k_speed` comes from the checkpoint's training metadata
+    /// (`training.k_speed`, or `training.scenario.task.k_speed`) when present, else
+    /// `default_k_speed`; the second value says which.
+    pub fn load(path: &std::path::Path, default_k_speed: f32) -> anyhow::Result<(Self, bool)> {
+        let policy = policy::Policy::load(path)
+            .map_err(|e| anyhow::anyhow!("cannot load policy {}: {e}", path.display()))?;
+        let meta_k = checkpoint_k_speed(&policy.meta().training);
+        let state = policy.new_state();
+        Ok((
+            Self {
+                policy,
+                state,
+                k_speed: meta_k.unwrap_or(default_k_speed),
+            },
+            meta_k.is_some(),
+        ))
+    }
+
+    pub fn from_policy(policy: policy::Policy, k_speed: f32) -> Self {
+        let state = policy.new_state();
+        Self {
+            policy,
+            state,
+            k_speed,
+        }
+    }
+
+    pub fn state(&self) -> &policy::PolicyState {
+        &self.state
+    }
+
+    /// The discrete action for row 0 of `obs` (advances the recurrent state).
+    pub fn action(&mut self, obs: &ObsBatch) -> anyhow::Result<Action> {
+        let a = self
+            .policy
+            .act(obs, &mut self.state, policy::ActMode::Greedy)?;
+        Action::from_index(a as usize).ok_or_else(|| anyhow::anyhow!("policy gave action {a}"))
+    }
+}
+
+/// `k_speed` from a checkpoint's free-form training metadata, if it holds a positive one.
+pub fn checkpoint_k_speed(training: &serde_json::Value) -> Option<f32> {
+    [
+        training.get("k_speed"),
+        training.pointer("/scenario/task/k_speed"),
+        training.pointer("/config/task/k_speed"),
+    ]
+    .into_iter()
+    .flatten()
+    .find_map(|v| v.as_f64())
+    .filter(|k| k.is_finite() && *k > 0.0)
+    .map(|k| k as f32)
+}
+
+impl Controller for PolicyController {
+    fn reset(&mut self) {
+        self.state.reset();
+    }
+    fn act(&mut self, obs: &ObsBatch) -> anyhow::Result<[f32; 2]> {
+        Ok(action_velocity(self.action(obs)?, self.k_speed))
+    }
+    fn name(&self) -> &'static str {
+        "policy"
     }
 }
 
@@ -135,6 +174,16 @@ impl Controller for GreedyController {
 mod tests {
     use super::*;
     use obs::ObsBuilder;
+
+    fn params(k: f32) -> GreedyParams {
+        GreedyParams {
+            robot_radius: 0.08,
+            machine_half: [0.12, 0.12],
+            storage_half: [0.15, 0.08],
+            k_speed: k,
+            dt: 0.1,
+        }
+    }
 
     fn b(own: [f32; 2], has_part: bool, m: Vec<([f32; 2], bool)>, s: Vec<[f32; 2]>) -> ObsBatch {
         ObsBuilder {
@@ -150,11 +199,11 @@ mod tests {
 
     #[test]
     fn goes_to_nearest_ready_machine() {
-        let g = GreedyController::new(0.5);
+        let g = GreedyController::new(params(0.5));
         let o = b(
             [0.0, 0.0],
             false,
-            vec![([0.2, 0.0], false), ([0.0, -0.6], true), ([0.9, 0.9], true)],
+            vec![([0.5, 0.2], false), ([0.0, -0.6], true), ([0.9, 0.9], true)],
             vec![[-1.0, 0.0]],
         );
         assert_eq!(g.action(&o).unwrap(), Action::Down);
@@ -163,36 +212,34 @@ mod tests {
     }
 
     #[test]
-    fn waits_at_nearest_machine_when_none_ready() {
-        let g = GreedyController::new(0.5);
+    fn stays_when_no_machine_is_ready() {
+        let g = GreedyController::new(params(0.5));
         let o = b(
             [0.0, 0.0],
             false,
             vec![([-0.4, 0.1], false), ([0.9, 0.9], false)],
-            vec![],
+            vec![[1.0, -1.0]],
         );
-        assert_eq!(g.action(&o).unwrap(), Action::Left);
-        let o = b([0.0, 0.0], false, vec![([0.01, 0.0], false)], vec![]);
         assert_eq!(g.action(&o).unwrap(), Action::Stay);
     }
 
     #[test]
     fn with_part_goes_to_storage() {
-        let g = GreedyController::new(0.3);
+        let g = GreedyController::new(params(0.3));
         let o = b(
             [0.0, 0.0],
             true,
-            vec![([0.1, 0.0], true)],
+            vec![([0.6, -0.6], true)],
             vec![[0.2, 0.7], [1.0, 1.0]],
         );
         assert_eq!(g.action(&o).unwrap(), Action::Up);
-        let o = b([0.0, 0.0], true, vec![([0.1, 0.0], true)], vec![]);
+        let o = b([0.0, 0.0], true, vec![([0.6, 0.0], true)], vec![]);
         assert_eq!(g.action(&o).unwrap(), Action::Stay);
     }
 
     #[test]
     fn refuses_invalid_batches() {
-        let g = GreedyController::new(0.5);
+        let g = GreedyController::new(params(0.5));
         let mut o = b([0.0, 0.0], false, vec![([0.5, 0.0], true)], vec![]);
         o.machines[0] = f32::NAN;
         assert!(g.action(&o).is_err());
@@ -209,5 +256,78 @@ mod tests {
             assert_eq!(action_velocity(Action::from_index(i).unwrap(), 1.0), *v);
         }
         assert!(Action::from_index(5).is_none());
+    }
+
+    fn tmp(name: &str) -> std::path::PathBuf {
+        std::env::temp_dir().join(format!("robot_node_{}_{name}", std::process::id()))
+    }
+
+    #[test]
+    fn policy_controller_loads_checkpoint_keeps_and_resets_state() {
+        let mut arch = policy::ArchConfig::smappo();
+        arch.d_model = 8;
+        arch.heads = 2;
+        arch.hidden = 8;
+        let actor = policy::Actor::new(arch, 7);
+        let path = tmp("ok.safetensors");
+        policy::checkpoint::save_policy(
+            &path,
+            &actor,
+            serde_json::json!({"setup": "6.4_2", "k_speed": 0.3}),
+        )
+        .unwrap();
+        let (mut c, from_meta) = PolicyController::load(&path, 0.5).unwrap();
+        assert!(from_meta);
+        assert_eq!(c.k_speed, 0.3);
+        let o = b(
+            [0.1, -0.2],
+            false,
+            vec![([0.5, 0.5], true), ([-0.5, 0.5], false)],
+            vec![[0.0, -0.9]],
+        );
+        // same decisions as the policy crate's own inference from a zero state
+        let mut reference = policy::Policy::load(&path).unwrap();
+        let mut st = reference.new_state();
+        for _ in 0..3 {
+            let a = reference.act(&o, &mut st, policy::ActMode::Greedy).unwrap();
+            let v = c.act(&o).unwrap();
+            assert_eq!(
+                v,
+                action_velocity(Action::from_index(a as usize).unwrap(), 0.3)
+            );
+        }
+        assert!(c.state().h.iter().any(|v| *v != 0.0));
+        assert_eq!(c.state().h, st.h);
+        c.reset();
+        assert!(c.state().h.iter().all(|v| *v == 0.0));
+        std::fs::remove_file(&path).ok();
+    }
+
+    #[test]
+    fn policy_controller_refuses_bad_files_with_clear_errors() {
+        let missing = tmp("missing.safetensors");
+        let e = PolicyController::load(&missing, 0.5).err().unwrap();
+        assert!(format!("{e:#}").contains("cannot load policy"), "{e:#}");
+        let junk = tmp("junk.safetensors");
+        std::fs::write(&junk, b"this is not a checkpoint").unwrap();
+        let e = PolicyController::load(&junk, 0.5).err().unwrap();
+        let msg = format!("{e:#}");
+        assert!(
+            msg.contains("junk.safetensors") && msg.contains("corrupt"),
+            "{msg}"
+        );
+        std::fs::remove_file(&junk).ok();
+    }
+
+    #[test]
+    fn k_speed_metadata_forms() {
+        use serde_json::json;
+        assert_eq!(checkpoint_k_speed(&json!({"k_speed": 0.4})), Some(0.4));
+        assert_eq!(
+            checkpoint_k_speed(&json!({"scenario": {"task": {"k_speed": 0.2}}})),
+            Some(0.2)
+        );
+        assert_eq!(checkpoint_k_speed(&json!({"k_speed": -1.0})), None);
+        assert_eq!(checkpoint_k_speed(&serde_json::Value::Null), None);
     }
 }

@@ -12,7 +12,7 @@ use std::time::{Duration, Instant};
 
 use anyhow::{anyhow, Context as _};
 use ros2_client::dds::rustdds::mio1::{Events, Interest, Poll, Token};
-use ros2_client::dds::{Context, ContextOptions, Node, Publisher, Subscription};
+use ros2_client::dds::{Context, ContextOptions, Node, Subscription};
 use ros2_client::log::LogLevel;
 use ros2_client::{rosout, Name, NodeName, NodeOptions};
 use tracing::{debug, info, warn};
@@ -21,24 +21,52 @@ use msgs::topics::{self, Leaf};
 use msgs::{Bool, Clock, EntityTopic, PoseStamped, Profile, RosMessage, Twist};
 
 use crate::args::{ControllerKind, Params};
-use crate::controller::{Controller, GreedyController};
+use crate::controller::{Controller, GreedyController, PolicyController};
 use crate::tick::{Brain, Outcome};
 use crate::world::{Counters, DropReason, World, WorldConfig};
+use msgs::dds::{stamp_key_info, StampedWriter};
+use obs::greedy::GreedyParams;
 
-/// Build the controller the parameters ask for.
+/// Build the controller the parameters ask for, and the speed limit of its commands.
 ///
-/// The learned policy is the seam: `policy::Policy::load(path)` wrapped in a
-/// `Controller` (reset = `new_state()`, act = `act(..)` -> [`crate::controller::action_velocity`]).
-/// The `policy` crate is not integrated yet, so asking for it is an error rather than a
-/// silent fallback to the scripted controller.
-pub fn make_controller(p: &Params) -> anyhow::Result<Box<dyn Controller>> {
+/// `policy`: a [`PolicyController`] from the checkpoint (a wrong or corrupt file is an
+/// error naming the file and the problem); its k_speed comes from the checkpoint's
+/// training metadata when present, else from the `k_speed` parameter.
+pub fn make_controller(p: &Params) -> anyhow::Result<(Box<dyn Controller>, f64)> {
     match p.controller {
-        ControllerKind::Greedy => Ok(Box::new(GreedyController::new(p.k_speed as f32))),
-        ControllerKind::Policy => Err(anyhow!(
-            "controller `policy` (policy file {:?}) is not available in this build: the \
-             learned policy is not integrated yet; use -p controller:=greedy",
-            p.policy
-        )),
+        ControllerKind::Greedy => {
+            let gp = greedy_params(p);
+            Ok((Box::new(GreedyController::new(gp)), p.k_speed))
+        }
+        ControllerKind::Policy => {
+            let path = p.policy.as_ref().ok_or_else(|| {
+                anyhow!("controller `policy` needs a checkpoint: -p policy:=PATH")
+            })?;
+            let (c, from_meta) = PolicyController::load(path, p.k_speed as f32)?;
+            let k = c.k_speed as f64;
+            info!(
+                "policy {} loaded ({}), k_speed {k} m/s from {}",
+                path.display(),
+                "checkpoint",
+                if from_meta {
+                    "checkpoint metadata"
+                } else {
+                    "the k_speed parameter"
+                }
+            );
+            Ok((Box::new(c), k))
+        }
+    }
+}
+
+/// The greedy controller's knowledge of the fleet: sizes, speed and control period.
+pub fn greedy_params(p: &Params) -> GreedyParams {
+    GreedyParams {
+        robot_radius: p.robot_radius as f32,
+        machine_half: [p.machine_half[0] as f32, p.machine_half[1] as f32],
+        storage_half: [p.storage_half[0] as f32, p.storage_half[1] as f32],
+        k_speed: p.k_speed as f32,
+        dt: (1.0 / p.control_rate_hz) as f32,
     }
 }
 
@@ -74,7 +102,7 @@ fn subscribe<M: RosMessage>(
 
 /// Run the node until `stop` is set. Returns the final counters.
 pub fn run(p: &Params, stop: &AtomicBool) -> anyhow::Result<Counters> {
-    let controller = make_controller(p)?;
+    let (controller, k_speed) = make_controller(p)?;
     let me = p.robot_id();
     if me.is_empty() {
         return Err(anyhow!(
@@ -98,7 +126,7 @@ pub fn run(p: &Params, stop: &AtomicBool) -> anyhow::Result<Counters> {
             }
         })?;
 
-    let result = event_loop(p, stop, &ctx, &mut node, controller, &me);
+    let result = event_loop(p, stop, &ctx, &mut node, controller, k_speed, &me);
     drop(node); // signals the spinner to stop
     if spin_thread.join().is_err() {
         warn!("spinner thread panicked");
@@ -112,6 +140,7 @@ fn event_loop(
     ctx: &Context,
     node: &mut Node,
     controller: Box<dyn Controller>,
+    k_speed: f64,
     me: &str,
 ) -> anyhow::Result<Counters> {
     let world = World::new(
@@ -125,20 +154,14 @@ fn event_loop(
             },
         },
     );
-    let mut brain = Brain::new(world, controller, p.k_speed);
+    let mut brain = Brain::new(world, controller, k_speed);
 
+    // cmd_vel carries the stamp of the state it answers as its DDS source timestamp
+    // (lockstep); otherwise the wall clock, like any ROS 2 publisher.
     let cmd_name = topics::robot(me, Leaf::CmdVel).ros_name();
-    let cmd_qos = Profile::RobotStream.qos();
-    let cmd_topic = node
-        .create_topic(
-            &Name::parse(&cmd_name).map_err(dds_err("topic name"))?,
-            Twist::type_name(),
-            &cmd_qos,
-        )
-        .map_err(dds_err("create cmd_vel topic"))?;
-    let cmd_pub: Publisher<Twist> = node
-        .create_publisher(&cmd_topic, Some(cmd_qos))
-        .map_err(dds_err("create cmd_vel publisher"))?;
+    let cmd_pub: StampedWriter<Twist> =
+        StampedWriter::new(ctx, node, &cmd_name, Profile::RobotStream)
+            .map_err(|e| anyhow!("cmd_vel writer: {e}"))?;
 
     let mut poll = Poll::new().context("mio poll")?;
     let mut events = Events::with_capacity(256);
@@ -217,11 +240,18 @@ fn event_loop(
     let mut sim_last_index: Option<i64> = None;
     let mut sim_last_t: f64 = f64::NEG_INFINITY;
 
-    let publish = |brain: &mut Brain, v: [f64; 2]| {
-        if cmd_pub.publish(Twist::planar(v[0], v[1])).is_err() {
+    let publish = |brain: &mut Brain, v: [f64; 2], stamp: Option<i64>| {
+        if cmd_pub
+            .write(Twist::planar(v[0], v[1]), stamp.map(|us| us * 1000))
+            .is_err()
+        {
             brain.counters.publish_errors += 1;
         }
     };
+    // lockstep: the last state acted on, and the state waited for (since when)
+    let mut last_acted: Option<i64> = None;
+    let mut pending: Option<(i64, Instant)> = None;
+    let lockstep_wait = Duration::from_secs_f64(p.lockstep_wait_s);
 
     while !stop.load(Ordering::SeqCst) {
         // ---- wait for data or the next deadline (at most 100 ms, to notice `stop`)
@@ -231,6 +261,9 @@ fn event_loop(
             .min(now + Duration::from_millis(100));
         if clock_sub.is_none() {
             deadline = deadline.min(next_tick);
+        }
+        if let Some((_, since)) = pending {
+            deadline = deadline.min(since + lockstep_wait);
         }
         let timeout = deadline.saturating_duration_since(now);
         if let Err(e) = poll.poll(&mut events, Some(timeout)) {
@@ -279,8 +312,66 @@ fn event_loop(
             brain.counters.subscriptions = subs.len() as u64;
         }
 
+        // ---- lockstep: act once per simulator state (docs/adr/0001-lockstep.md)
+        if p.lockstep {
+            if let Some(clock) = clock_sub.as_ref() {
+                while let Ok(Some(_)) = clock.take() {} // /clock is not used in lockstep
+            }
+            if let Some(s) = brain.world.own_pose_stamp() {
+                if last_acted.is_some_and(|l| s < l) {
+                    info!("sim time went back: resetting controller");
+                    brain.reset();
+                    last_acted = None;
+                    pending = None;
+                }
+                if last_acted.is_none_or(|l| s > l) {
+                    let since = match pending {
+                        Some((ps, since)) if ps == s => since,
+                        _ => {
+                            let now = Instant::now();
+                            pending = Some((s, now));
+                            now
+                        }
+                    };
+                    let missing = brain.world.lockstep_missing(s, last_acted, now_s(t0));
+                    let timed_out = since.elapsed() >= lockstep_wait;
+                    if missing == Some(0) || timed_out {
+                        if missing != Some(0) {
+                            brain.counters.lockstep_wait_timeouts += 1;
+                            debug!("lockstep: acting on {s} us with {missing:?} entities missing");
+                        }
+                        let r = brain.tick_lockstep(s);
+                        publish(&mut brain, r.velocity, Some(s));
+                        last_acted = Some(s);
+                        pending = None;
+                        if last_outcome
+                            .as_ref()
+                            .is_none_or(|l| !l.same_kind(&r.outcome))
+                        {
+                            match &r.outcome {
+                                Outcome::Command => rosout!(
+                                    log,
+                                    LogLevel::Info,
+                                    "controlling (lockstep): observation counts {:?}",
+                                    r.counts
+                                ),
+                                other => rosout!(
+                                    log,
+                                    LogLevel::Warn,
+                                    "commanding zero velocity: {other:?}"
+                                ),
+                            }
+                        }
+                        last_outcome = Some(r.outcome);
+                    }
+                }
+            }
+        }
+
         // ---- tick
-        let due = if let Some(clock) = clock_sub.as_ref() {
+        let due = if p.lockstep {
+            false
+        } else if let Some(clock) = clock_sub.as_ref() {
             let mut latest: Option<f64> = None;
             loop {
                 match clock.take() {
@@ -324,7 +415,7 @@ fn event_loop(
         };
         if due {
             let r = brain.tick(now_s(t0));
-            publish(&mut brain, r.velocity);
+            publish(&mut brain, r.velocity, None);
             let changed = last_outcome
                 .as_ref()
                 .is_none_or(|l| !l.same_kind(&r.outcome));
@@ -354,7 +445,7 @@ fn event_loop(
     }
 
     // ---- shutdown: stop the robot
-    publish(&mut brain, [0.0, 0.0]);
+    publish(&mut brain, [0.0, 0.0], None);
     rosout!(log, LogLevel::Info, "stopping: published zero cmd_vel");
     info!("final counters: {}", brain.counters);
     // give the reliable writer a moment to deliver the zero command before teardown
@@ -381,7 +472,12 @@ fn drain(sub: &Sub, brain: &mut Brain, now: f64) {
                 }
             },
             SubKind::Flag(s) => match s.take() {
-                Ok(Some((m, _))) => Some(brain.world.on_flag(&sub.topic, m.data, now)),
+                Ok(Some((m, info))) => Some(brain.world.on_flag_stamped(
+                    &sub.topic,
+                    m.data,
+                    stamp_key_info(&info),
+                    now,
+                )),
                 Ok(None) => None,
                 Err(e) => {
                     debug!("undecodable sample on {}: {e:?}", sub.topic.ros_name());

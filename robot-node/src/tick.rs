@@ -60,13 +60,24 @@ impl Brain {
     }
 
     pub fn tick(&mut self, now: f64) -> TickResult {
+        let obs = self.world.observation(now);
+        self.tick_on(obs)
+    }
+
+    /// Lockstep: act on simulator state `stamp` (only data carrying that stamp).
+    pub fn tick_lockstep(&mut self, stamp: i64) -> TickResult {
+        let obs = self.world.observation_at(stamp);
+        self.tick_on(obs)
+    }
+
+    fn tick_on(&mut self, obs: Result<obs::ObsBuilder, OwnStale>) -> TickResult {
         self.counters.ticks += 1;
         let zero = |outcome, counts| TickResult {
             velocity: [0.0, 0.0],
             outcome,
             counts,
         };
-        let builder = match self.world.observation(now) {
+        let builder = match obs {
             Ok(b) => b,
             Err(s) => {
                 self.own_ok = false;
@@ -159,7 +170,14 @@ mod tests {
 
     #[test]
     fn greedy_heads_to_machine_then_stops_when_stale() {
-        let mut b = Brain::new(world(), Box::new(GreedyController::new(0.5)), 0.5);
+        let gp = obs::greedy::GreedyParams {
+            robot_radius: 0.08,
+            machine_half: [0.12, 0.12],
+            storage_half: [0.15, 0.08],
+            k_speed: 0.5,
+            dt: 0.1,
+        };
+        let mut b = Brain::new(world(), Box::new(GreedyController::new(gp)), 0.5);
         let r = b.tick(0.0);
         assert_eq!(r.outcome, Outcome::OwnStale(OwnStale::NoPose));
         assert_eq!(r.velocity, [0.0, 0.0]);

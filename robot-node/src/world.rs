@@ -13,6 +13,9 @@ use msgs::{Entity, EntityTopic, Leaf, PoseStamped, RoomBounds};
 pub struct Sample<T> {
     pub value: T,
     pub at: f64,
+    /// Simulator step stamp (microseconds, [`msgs::dds::stamp_key_ns`]): a pose's header
+    /// stamp, a flag's DDS source timestamp. Used in lockstep only.
+    pub stamp: Option<i64>,
 }
 
 impl<T: Copy> Sample<T> {
@@ -59,6 +62,8 @@ pub struct Counters {
     pub zero_bad_output: u64,
     pub publish_errors: u64,
     pub subscriptions: u64,
+    /// Lockstep: states acted on before every expected entity of that stamp was in.
+    pub lockstep_wait_timeouts: u64,
 }
 
 impl Counters {
@@ -84,7 +89,7 @@ impl std::fmt::Display for Counters {
             f,
             "accepted={} dropped(decode={} non_finite={} out_of_room={} unexpected={}) \
              ticks={} commands={} zero(own_stale={} obs_invalid={} controller_error={} bad_output={}) \
-             publish_errors={} subscriptions={}",
+             publish_errors={} subscriptions={} lockstep_wait_timeouts={}",
             self.accepted,
             self.dropped_decode,
             self.dropped_non_finite,
@@ -97,7 +102,8 @@ impl std::fmt::Display for Counters {
             self.zero_controller_error,
             self.zero_bad_output,
             self.publish_errors,
-            self.subscriptions
+            self.subscriptions,
+            self.lockstep_wait_timeouts
         )
     }
 }
@@ -121,7 +127,28 @@ pub struct World {
     own: EntityState,
     machines: BTreeMap<u32, EntityState>,
     storages: BTreeMap<u32, EntityState>,
-    peers: BTreeMap<String, EntityState>,
+    peers: BTreeMap<PeerKey, EntityState>,
+}
+
+/// Peers in natural order (`robot_2` before `robot_10`): the simulator's robot order when
+/// robots are named `robot_<spawn index>`, so observations match the simulator's exactly.
+#[derive(Debug, Clone, PartialEq, Eq, PartialOrd, Ord)]
+struct PeerKey {
+    stem: String,
+    index: Option<u64>,
+    name: String,
+}
+
+impl PeerKey {
+    fn new(name: &str) -> Self {
+        let digits = name.len() - name.trim_end_matches(|c: char| c.is_ascii_digit()).len();
+        let (stem, num) = name.split_at(name.len() - digits);
+        Self {
+            stem: stem.to_string(),
+            index: num.parse().ok(),
+            name: name.to_string(),
+        }
+    }
 }
 
 /// Own state is not usable.
@@ -159,7 +186,7 @@ impl World {
     fn slot(&mut self, entity: &Entity) -> &mut EntityState {
         match entity {
             Entity::Robot(r) if *r == self.me => &mut self.own,
-            Entity::Robot(r) => self.peers.entry(r.clone()).or_default(),
+            Entity::Robot(r) => self.peers.entry(PeerKey::new(r)).or_default(),
             Entity::Machine(j) => self.machines.entry(*j).or_default(),
             Entity::Storage(k) => self.storages.entry(*k).or_default(),
         }
@@ -179,7 +206,12 @@ impl World {
             msgs::InvalidMsg::NonFinite { .. } => DropReason::NonFinite,
             msgs::InvalidMsg::OutOfRoom { .. } => DropReason::OutOfRoom,
         })?;
-        self.slot(&topic.entity).pose = Some(Sample { value: xy, at: now });
+        let stamp = Some(msgs::dds::stamp_key_time(&msg.header.stamp));
+        self.slot(&topic.entity).pose = Some(Sample {
+            value: xy,
+            at: now,
+            stamp,
+        });
         Ok(())
     }
 
@@ -190,11 +222,26 @@ impl World {
         value: bool,
         now: f64,
     ) -> Result<(), DropReason> {
+        self.on_flag_stamped(topic, value, None, now)
+    }
+
+    /// A Bool arrived, with the step stamp of its DDS source timestamp.
+    pub fn on_flag_stamped(
+        &mut self,
+        topic: &EntityTopic,
+        value: bool,
+        stamp: Option<i64>,
+        now: f64,
+    ) -> Result<(), DropReason> {
         match (&topic.entity, topic.leaf) {
             (Entity::Robot(_), Leaf::HasPart) | (Entity::Machine(_), Leaf::PartReady) => {}
             _ => return Err(DropReason::Unexpected),
         }
-        self.slot(&topic.entity).flag = Some(Sample { value, at: now });
+        self.slot(&topic.entity).flag = Some(Sample {
+            value,
+            at: now,
+            stamp,
+        });
         Ok(())
     }
 
@@ -247,6 +294,88 @@ impl World {
             machines,
             storages,
             peers,
+        })
+    }
+
+    /// Stamp of the latest own pose (lockstep: the simulator state this robot is at).
+    pub fn own_pose_stamp(&self) -> Option<i64> {
+        self.own.pose.and_then(|p| p.stamp)
+    }
+
+    fn each_entity(&self) -> impl Iterator<Item = (&EntityState, bool)> {
+        // (state, needs a flag)
+        self.machines
+            .values()
+            .map(|m| (m, true))
+            .chain(self.storages.values().map(|s| (s, false)))
+            .chain(self.peers.values().map(|r| (r, true)))
+    }
+
+    fn complete_at(e: &EntityState, needs_flag: bool, stamp: i64) -> bool {
+        e.pose.and_then(|p| p.stamp) == Some(stamp)
+            && (!needs_flag || e.flag.and_then(|f| f.stamp) == Some(stamp))
+    }
+
+    /// Lockstep: is everything of state `stamp` in? Own pose and has_part must carry
+    /// `stamp`; so must every entity expected at this state: those that were part of the
+    /// previous state `prev` (any sample stamped >= `prev`), or, before the first action,
+    /// every entity with fresh data. An entity that left the simulator is therefore waited
+    /// for once at most. Returns the number of expected entities still missing, or None
+    /// when own data of `stamp` is not complete.
+    pub fn lockstep_missing(&self, stamp: i64, prev: Option<i64>, now: f64) -> Option<usize> {
+        if !Self::complete_at(&self.own, true, stamp) {
+            return None;
+        }
+        let (rt, st) = (self.cfg.stale_timeout_s, self.cfg.static_stale_timeout_s);
+        let expected = |e: &EntityState, needs_flag: bool| match prev {
+            Some(p) => {
+                e.pose.and_then(|s| s.stamp).is_some_and(|s| s >= p)
+                    || (needs_flag && e.flag.and_then(|s| s.stamp).is_some_and(|s| s >= p))
+            }
+            None => {
+                let t = if needs_flag { rt } else { st };
+                Sample::fresh(&e.pose, now, t).is_some()
+            }
+        };
+        Some(
+            self.each_entity()
+                .filter(|(e, f)| expected(e, *f) && !Self::complete_at(e, *f, stamp))
+                .count(),
+        )
+    }
+
+    /// Lockstep observation of state `stamp`: own data and every entity whose data carries
+    /// exactly that stamp (what the simulator observation of that step holds).
+    pub fn observation_at(&self, stamp: i64) -> Result<obs::ObsBuilder, OwnStale> {
+        let own_pose = self.own.pose.ok_or(OwnStale::NoPose)?;
+        let own_flag = self.own.flag.ok_or(OwnStale::NoHasPart)?;
+        if own_pose.stamp != Some(stamp) {
+            return Err(OwnStale::PoseStale);
+        }
+        if own_flag.stamp != Some(stamp) {
+            return Err(OwnStale::HasPartStale);
+        }
+        let f = |p: [f64; 2]| [p[0] as f32, p[1] as f32];
+        let at = |s: &Option<Sample<[f64; 2]>>| s.filter(|p| p.stamp == Some(stamp));
+        let flag_at = |s: &Option<Sample<bool>>| s.filter(|p| p.stamp == Some(stamp));
+        Ok(obs::ObsBuilder {
+            own_pos: f(own_pose.value),
+            has_part: own_flag.value,
+            machines: self
+                .machines
+                .values()
+                .filter_map(|m| Some((f(at(&m.pose)?.value), flag_at(&m.flag)?.value)))
+                .collect(),
+            storages: self
+                .storages
+                .values()
+                .filter_map(|s| Some(f(at(&s.pose)?.value)))
+                .collect(),
+            peers: self
+                .peers
+                .values()
+                .filter_map(|r| Some((f(at(&r.pose)?.value), flag_at(&r.flag)?.value)))
+                .collect(),
         })
     }
 

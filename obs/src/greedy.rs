@@ -1,0 +1,116 @@
+//! The scripted greedy baseline, on the observation alone.
+//!
+//! It lives here, next to the observation type, so the simulator (offline episodes) and
+//! `robot_node` (on the robot, built from ROS topics) run one and the same function: an
+//! offline greedy episode and a fleet of greedy `robot_node`s on the sim bridge must agree
+//! step for step.
+
+/// What the greedy controller knows about the world besides its observation: the fleet's
+/// body sizes, the action speed and the control period.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct GreedyParams {
+    pub robot_radius: f32,
+    /// Half extents of a machine box.
+    pub machine_half: [f32; 2],
+    /// Half extents of a storage box.
+    pub storage_half: [f32; 2],
+    /// Speed of one discrete action, m/s.
+    pub k_speed: f32,
+    /// Control period, s.
+    pub dt: f32,
+}
+
+const MOVES: [[f32; 2]; 5] = [[0.0, 0.0], [-1.0, 0.0], [1.0, 0.0], [0.0, -1.0], [0.0, 1.0]];
+
+/// Decentralized greedy: without a part, head for the nearest ready machine that no
+/// nearer part-less peer is closer to; with a part, the nearest storage. Moves on one axis
+/// at a time (the 5-action set), preferring the axis with the larger gap, and avoids a
+/// move that would bring it into contact with a peer or a box other than its target.
+pub fn greedy_action(
+    own: &[f32],
+    machines: &[f32],
+    storages: &[f32],
+    peers: &[f32],
+    p: &GreedyParams,
+) -> u8 {
+    let has_part = own[2] > 0.5;
+    let r = p.robot_radius;
+    let mut target: Option<([f32; 2], [f32; 2])> = None; // (relative centre, half)
+    if has_part {
+        let mut best = f32::INFINITY;
+        for s in storages.chunks_exact(2) {
+            let d = s[0] * s[0] + s[1] * s[1];
+            if d < best {
+                best = d;
+                target = Some(([s[0], s[1]], p.storage_half));
+            }
+        }
+    } else {
+        let mut best = f32::INFINITY;
+        for m in machines.chunks_exact(3) {
+            if m[2] < 0.5 {
+                continue;
+            }
+            let mine = m[0] * m[0] + m[1] * m[1];
+            // Claimed if a part-less peer is nearer to this machine than I am.
+            let claimed = peers.chunks_exact(3).any(|q| {
+                q[2] < 0.5 && {
+                    let (dx, dy) = (m[0] - q[0], m[1] - q[1]);
+                    dx * dx + dy * dy < mine
+                }
+            });
+            if !claimed && mine < best {
+                best = mine;
+                target = Some(([m[0], m[1]], p.machine_half));
+            }
+        }
+    }
+    let Some((t, _half)) = target else {
+        return 0;
+    };
+    let step = p.k_speed * p.dt;
+    // Candidate moves: the axis with the larger gap first, then the other axis, then the
+    // two sideways moves (to slide around an obstacle).
+    let (ax, ay) = (t[0].abs(), t[1].abs());
+    let sx = if t[0] < 0.0 { 1u8 } else { 2 };
+    let sy = if t[1] < 0.0 { 3u8 } else { 4 };
+    let (first, second) = if ax >= ay { (sx, sy) } else { (sy, sx) };
+    let side = if ax >= ay { [3u8, 4] } else { [1u8, 2] };
+    let candidates = [first, second, side[0], side[1]];
+    let min_gap = 0.5 * step;
+    for &a in &candidates {
+        let mv = MOVES[a as usize];
+        // Skip a move along an axis where the target is already aligned within a step
+        // (it would overshoot and oscillate), unless it is a sideways escape.
+        let along = [t[0], t[1]][if mv[0] != 0.0 { 0 } else { 1 }];
+        if (a == first || a == second) && along.abs() < step * 0.5 {
+            continue;
+        }
+        let next = [mv[0] * step, mv[1] * step];
+        let peer_ok = peers.chunks_exact(3).all(|q| {
+            let (dx, dy) = (q[0] - next[0], q[1] - next[1]);
+            let now = q[0] * q[0] + q[1] * q[1];
+            let then = dx * dx + dy * dy;
+            // Allow moves that increase distance even when already close.
+            then >= (2.0 * r + min_gap).powi(2) || then > now
+        });
+        let box_ok = |c: &[f32], half: [f32; 2], is_target: bool| {
+            if is_target {
+                return true;
+            }
+            let gx = (c[0] - next[0]).abs() - half[0] - r;
+            let gy = (c[1] - next[1]).abs() - half[1] - r;
+            gx.max(gy) >= min_gap
+        };
+        let machines_ok = machines
+            .chunks_exact(3)
+            .all(|m| box_ok(m, p.machine_half, !has_part && m[0] == t[0] && m[1] == t[1]));
+        let storages_ok = storages
+            .chunks_exact(2)
+            .all(|s| box_ok(s, p.storage_half, has_part && s[0] == t[0] && s[1] == t[1]));
+        if peer_ok && machines_ok && storages_ok {
+            return a;
+        }
+    }
+    0
+}
