@@ -72,7 +72,10 @@ fn measure_split(setup: Setup, secs: f64) -> Result<(f64, f64)> {
         steps += 1;
     }
     let per = (steps * n) as f64;
-    Ok((t_step.as_nanos() as f64 / per, t_obs.as_nanos() as f64 / per))
+    Ok((
+        t_step.as_nanos() as f64 / per,
+        t_obs.as_nanos() as f64 / per,
+    ))
 }
 
 pub fn run(a: BenchArgs) -> Result<()> {

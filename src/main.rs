@@ -10,7 +10,11 @@ use anyhow::Result;
 use clap::{Parser, Subcommand};
 
 #[derive(Parser)]
-#[command(name = "tending", version, about = "Decentralized multi-robot machine tending (SMAPPO)")]
+#[command(
+    name = "tending",
+    version,
+    about = "Decentralized multi-robot machine tending (SMAPPO)"
+)]
 struct Cli {
     #[command(subcommand)]
     cmd: Cmd,
@@ -22,6 +26,8 @@ enum Cmd {
     Sim(sim_cmd::SimArgs),
     /// Measure simulator throughput (agent-steps/s) and write a Markdown report.
     BenchSim(bench_sim::BenchArgs),
+    /// Print the default scenario config (TOML) to start a custom one from.
+    Config,
 }
 
 fn main() -> Result<()> {
@@ -29,5 +35,9 @@ fn main() -> Result<()> {
     match cli.cmd {
         Cmd::Sim(a) => sim_cmd::run(a),
         Cmd::BenchSim(a) => bench_sim::run(a),
+        Cmd::Config => {
+            print!("{}", sim::ScenarioConfig::default().to_toml());
+            Ok(())
+        }
     }
 }

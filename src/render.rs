@@ -34,41 +34,72 @@ impl Frame {
 
 const PX: u32 = 460;
 
-fn draw<DB: DrawingBackend>(area: &DrawingArea<DB, plotters::coord::Shift>, room: f32, f: &Frame) -> Result<()>
+fn draw<DB: DrawingBackend>(
+    area: &DrawingArea<DB, plotters::coord::Shift>,
+    room: f32,
+    f: &Frame,
+) -> Result<()>
 where
     DB::ErrorType: 'static,
 {
     let s = PX as f32 / room;
     let to = |p: [f32; 2]| -> (i32, i32) {
-        (((p[0] + room / 2.0) * s) as i32, ((room / 2.0 - p[1]) * s) as i32)
+        (
+            ((p[0] + room / 2.0) * s) as i32,
+            ((room / 2.0 - p[1]) * s) as i32,
+        )
     };
     let err = |e: DrawingAreaErrorKind<DB::ErrorType>| anyhow::anyhow!("drawing failed: {e:?}");
     area.fill(&WHITE).map_err(err)?;
-    area.draw(&Rectangle::new([(0, 0), (PX as i32 - 1, PX as i32 - 1)], BLACK.stroke_width(4)))
-        .map_err(err)?;
+    area.draw(&Rectangle::new(
+        [(0, 0), (PX as i32 - 1, PX as i32 - 1)],
+        BLACK.stroke_width(4),
+    ))
+    .map_err(err)?;
     for &(c, h) in &f.storages {
-        let (a, b) = (to([c[0] - h[0], c[1] + h[1]]), to([c[0] + h[0], c[1] - h[1]]));
-        area.draw(&Rectangle::new([a, b], RGBColor(60, 90, 220).filled())).map_err(err)?;
+        let (a, b) = (
+            to([c[0] - h[0], c[1] + h[1]]),
+            to([c[0] + h[0], c[1] - h[1]]),
+        );
+        area.draw(&Rectangle::new([a, b], RGBColor(60, 90, 220).filled()))
+            .map_err(err)?;
     }
     for &(c, h, ready) in &f.machines {
-        let (a, b) = (to([c[0] - h[0], c[1] + h[1]]), to([c[0] + h[0], c[1] - h[1]]));
-        let col = if ready { RGBColor(30, 170, 60) } else { RGBColor(170, 210, 170) };
-        area.draw(&Rectangle::new([a, b], col.filled())).map_err(err)?;
+        let (a, b) = (
+            to([c[0] - h[0], c[1] + h[1]]),
+            to([c[0] + h[0], c[1] - h[1]]),
+        );
+        let col = if ready {
+            RGBColor(30, 170, 60)
+        } else {
+            RGBColor(170, 210, 170)
+        };
+        area.draw(&Rectangle::new([a, b], col.filled()))
+            .map_err(err)?;
     }
     let rp = (f.robot_radius * s).max(2.0) as i32;
     for &(p, part) in &f.robots {
-        area.draw(&Circle::new(to(p), rp, RGBColor(210, 40, 40).filled())).map_err(err)?;
+        area.draw(&Circle::new(to(p), rp, RGBColor(210, 40, 40).filled()))
+            .map_err(err)?;
         if part {
-            area.draw(&Circle::new(to(p), (rp / 2).max(1), RGBColor(250, 220, 40).filled()))
-                .map_err(err)?;
+            area.draw(&Circle::new(
+                to(p),
+                (rp / 2).max(1),
+                RGBColor(250, 220, 40).filled(),
+            ))
+            .map_err(err)?;
         }
     }
     // Progress bar along the top edge: episode time; ticks below it: parts delivered.
     let w = (PX as f32 * f.step as f32 / 200.0).min(PX as f32) as i32;
-    area.draw(&Rectangle::new([(0, 0), (w, 4)], BLACK.filled())).map_err(err)?;
+    area.draw(&Rectangle::new([(0, 0), (w, 4)], BLACK.filled()))
+        .map_err(err)?;
     for k in 0..f.delivered.min(90) as i32 {
-        area.draw(&Rectangle::new([(4 + k * 5, 8), (6 + k * 5, 14)], RGBColor(60, 90, 220).filled()))
-            .map_err(err)?;
+        area.draw(&Rectangle::new(
+            [(4 + k * 5, 8), (6 + k * 5, 14)],
+            RGBColor(60, 90, 220).filled(),
+        ))
+        .map_err(err)?;
     }
     Ok(())
 }
@@ -109,7 +140,10 @@ pub fn write(path: &Path, cfg: &ScenarioConfig, frames: &[Frame]) -> Result<()> 
                 root.present()?;
             }
         }
-        other => bail!("--render {}: unknown extension `{other}` (use .gif, .svg or a directory)", path.display()),
+        other => bail!(
+            "--render {}: unknown extension `{other}` (use .gif, .svg or a directory)",
+            path.display()
+        ),
     }
     Ok(())
 }

@@ -140,7 +140,15 @@ pub fn run(a: SimArgs) -> Result<()> {
     let t0 = std::time::Instant::now();
     let ms: Vec<Metrics> = (0..a.episodes)
         .into_par_iter()
-        .map(|ep| run_episode(&cfg, setup, policy, episode_seed(a.seed, 0, ep as u64), |_| {}))
+        .map(|ep| {
+            run_episode(
+                &cfg,
+                setup,
+                policy,
+                episode_seed(a.seed, 0, ep as u64),
+                |_| {},
+            )
+        })
         .collect::<Result<_>>()?;
     let table = markdown_table(
         &METRICS_HEADER,

@@ -188,8 +188,21 @@ impl ScenarioConfig {
         Self::from_toml(&text, &path.display().to_string())
     }
 
+    /// TOML text with floats written as their shortest f32 form (2.3, not 2.299999952...).
     pub fn to_toml(&self) -> String {
-        toml::to_string_pretty(self).expect("config serializes")
+        fn tidy(v: &mut toml::Value) {
+            match v {
+                toml::Value::Float(f) => {
+                    *f = format!("{}", *f as f32).parse().unwrap_or(*f);
+                }
+                toml::Value::Table(t) => t.iter_mut().for_each(|(_, x)| tidy(x)),
+                toml::Value::Array(a) => a.iter_mut().for_each(tidy),
+                _ => {}
+            }
+        }
+        let mut v = toml::Value::try_from(self).expect("config serializes");
+        tidy(&mut v);
+        toml::to_string_pretty(&v).expect("config serializes")
     }
 
     /// Refuse values that would make the physics meaningless or blow up.

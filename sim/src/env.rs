@@ -90,6 +90,16 @@ fn softplus_pen(x: f32, k: f32) -> f32 {
     }
 }
 
+/// Distance from `p` to the nearest point of `set`, None for an empty set.
+#[inline]
+fn nearest(set: &[[f32; 2]], p: [f32; 2]) -> Option<f32> {
+    let mut best = f32::INFINITY;
+    for &c in set {
+        best = best.min(dist2(c, p));
+    }
+    best.is_finite().then(|| best.sqrt())
+}
+
 #[inline]
 fn dist2(a: [f32; 2], b: [f32; 2]) -> f32 {
     let dx = a[0] - b[0];
@@ -716,27 +726,19 @@ impl Env {
                 scratch.push(self.m_box[j].centre);
             }
         }
-        let nearest = |set: &mut dyn Iterator<Item = [f32; 2]>, p: [f32; 2]| -> Option<f32> {
-            let mut best = f32::INFINITY;
-            for c in set {
-                best = best.min(dist2(c, p));
-            }
-            best.is_finite().then(|| best.sqrt())
-        };
+        // Storage centres go after the ready machines in the same scratch buffer.
+        let n_ready = scratch.len();
+        scratch.extend(self.s_box.iter().map(|b| b.centre));
+        let (ready, stores) = scratch.split_at(n_ready);
         for i in 0..self.r_id.len() {
             let (p, prev) = (self.r_pos[i], self.r_prev[i]);
             let had_part = self.r_part[i];
             // Progress toward the closest target, measured against one target set for both
             // positions so that a target vanishing (picked by another robot) gives no jump.
-            let progress = if had_part {
-                let a = nearest(&mut self.s_box.iter().map(|b| b.centre), prev);
-                let b = nearest(&mut self.s_box.iter().map(|b| b.centre), p);
-                a.zip(b).map_or(0.0, |(a, b)| a - b)
-            } else {
-                let a = nearest(&mut scratch.iter().copied(), prev);
-                let b = nearest(&mut scratch.iter().copied(), p);
-                a.zip(b).map_or(0.0, |(a, b)| a - b)
-            };
+            let targets = if had_part { stores } else { ready };
+            let progress = nearest(targets, prev)
+                .zip(nearest(targets, p))
+                .map_or(0.0, |(a, b)| a - b);
             let mut reward =
                 rw.progress * progress + rw.collision * self.r_events[i].collisions as f32;
             if had_part {

@@ -47,6 +47,9 @@ impl Grid {
         let n = pos.len();
         self.cell_of.resize(n, 0);
         self.sorted.resize(n, 0);
+        if n <= BRUTE_FORCE_MAX {
+            return; // for_each_pair visits all pairs directly
+        }
         self.start.iter_mut().for_each(|s| *s = 0);
         for (i, p) in pos.iter().enumerate() {
             let c = (self.coord(p[1]) * self.dim + self.coord(p[0])) as u32;

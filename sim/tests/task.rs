@@ -303,3 +303,10 @@ fn unknown_setup_names_and_zero_groups_are_errors() {
     // 1000 robots still fit (the scaling benchmark needs them).
     assert!(Env::new(ScenarioConfig::default(), Setup::new(1000, 16, 2), 0).is_ok());
 }
+
+#[test]
+fn shipped_default_config_is_the_default() {
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../configs/default.toml");
+    let cfg = ScenarioConfig::load(&path).unwrap();
+    assert_eq!(cfg, ScenarioConfig::default());
+}
