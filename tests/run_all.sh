@@ -7,3 +7,27 @@ cd "$(dirname "$0")/.."
 export CARGO_TERM_COLOR=never
 echo "== cargo test --workspace --release"
 cargo test --workspace --release --locked -j 2 2>&1
+
+# Python: rclpy (real ROS 2 Jazzy, Fast DDS, from PyPI wheels) against the release binaries:
+# tests/interop (launch-scripts install layout + launch file, robot_node and sim_bridge
+# interop over DDS). The virtualenv lives in target/ (ignored), is created if missing and
+# reinstalled only when tests/interop/requirements.txt changes.
+echo "== cargo build --release --workspace --bins (binaries for the interop tests)"
+cargo build --release --locked -j 2 --workspace --bins 2>&1
+echo "== python interop tests (tests/interop)"
+venv="target/interop-venv"
+py_sys="$(command -v python3.11 || command -v python3)"
+stamp="$venv/.requirements.sha256"
+want="$(sha256sum tests/interop/requirements.txt | cut -d' ' -f1) $("$py_sys" -c 'import sys; print(sys.version.split()[0])')"
+if [ ! -x "$venv/bin/python" ] || [ "$(cat "$stamp" 2>/dev/null)" != "$want" ]; then
+    rm -rf "$venv"
+    "$py_sys" -m venv "$venv"
+    "$venv/bin/python" -m pip install --quiet --disable-pip-version-check \
+        -r tests/interop/requirements.txt
+    echo "$want" > "$stamp"
+fi
+export TENDING_BIN_DIR="${TENDING_BIN_DIR:-${CARGO_TARGET_DIR:-target}/release}"
+export RMW_IMPLEMENTATION=rmw_fastrtps_cpp
+unset ROS_LOCALHOST_ONLY ROS_AUTOMATIC_DISCOVERY_RANGE ROS_STATIC_PEERS FASTRTPS_DEFAULT_PROFILES_FILE
+# -rs: print why anything was skipped; no tests collected = exit 5 = failure (set -e)
+timeout 900 "$venv/bin/python" -m pytest tests/interop -q -rs -p no:cacheprovider
