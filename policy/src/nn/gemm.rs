@@ -61,7 +61,7 @@ pub fn gemm(
         );
     }
     assert!((m - 1) * rsc + (n - 1) < c.len(), "gemm: C too small");
-    if m <= SMALL_M {
+    if m <= SMALL_M || k <= SMALL_K {
         small(m, k, n, alpha, a, b, beta, c, rsc);
         return;
     }
@@ -90,6 +90,11 @@ pub fn gemm(
 /// Below this many rows, a direct loop beats packing the B operand (single-robot
 /// inference multiplies one row by 64x64 weights).
 const SMALL_M: usize = 4;
+
+/// With an inner dimension this small (the 2-3 feature entity encoders), packing costs more
+/// than it saves, and `matrixmultiply` would allocate its packing buffers on every call,
+/// breaking allocation-free inference.
+const SMALL_K: usize = 4;
 
 #[allow(clippy::too_many_arguments)]
 fn small(
