@@ -121,6 +121,7 @@ def!(
     "builtin_interfaces/Time stamp\nstring frame_id\n"
 );
 def!(BOOL, "std_msgs", "Bool", [], "bool data\n");
+def!(STRING, "std_msgs", "String", [], "string data\n");
 def!(
     COLOR_RGBA,
     "std_msgs",
@@ -303,6 +304,7 @@ impl_msg!(
     Duration => DURATION,
     Header => HEADER,
     Bool => BOOL,
+    StdString => STRING,
     ColorRGBA => COLOR_RGBA,
     Point => POINT,
     Quaternion => QUATERNION,
@@ -327,6 +329,7 @@ pub static ALL: &[&MsgDef] = &[
     &DURATION,
     &HEADER,
     &BOOL,
+    &STRING,
     &COLOR_RGBA,
     &POINT,
     &QUATERNION,

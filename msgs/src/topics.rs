@@ -18,6 +18,10 @@ use crate::schema::{self, MsgDef};
 pub const CLOCK: &str = "/clock";
 pub const MARKERS: &str = "/tending/markers";
 pub const METRICS: &str = "/tending/metrics";
+/// sim_bridge's run-time commands (std_msgs/String): `add_machine [x y]`,
+/// `remove_machine <id>`, `add_storage [x y]`, `remove_storage <id>`,
+/// `add_robot <name> [x y]`, `remove_robot <name>`.
+pub const COMMAND: &str = "/tending/command";
 /// The frame every pose is expressed in.
 pub const FRAME_ID: &str = "map";
 

@@ -66,6 +66,12 @@ pub struct Bool {
     pub data: bool,
 }
 
+/// std_msgs/msg/String
+#[derive(Debug, Clone, PartialEq, Eq, Default, Serialize, Deserialize)]
+pub struct StdString {
+    pub data: String,
+}
+
 /// std_msgs/msg/ColorRGBA
 #[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
 pub struct ColorRGBA {

@@ -303,6 +303,7 @@ fn event_loop(
                 known.insert(topic.clone());
                 match add_sub(node, &poll, &mut subs, topic.clone()) {
                     Ok(()) => {
+                        brain.world.touch(&topic.entity);
                         brain.counters.subscriptions = subs.len() as u64;
                         info!("discovered {}", topic.ros_name());
                     }

@@ -297,6 +297,12 @@ impl World {
         })
     }
 
+    /// An entity was discovered (subscribed): lockstep expects its data from the first
+    /// state on, even before a sample arrived.
+    pub fn touch(&mut self, entity: &Entity) {
+        self.slot(entity);
+    }
+
     /// Stamp of the latest own pose (lockstep: the simulator state this robot is at).
     pub fn own_pose_stamp(&self) -> Option<i64> {
         self.own.pose.and_then(|p| p.stamp)
@@ -333,8 +339,9 @@ impl World {
                     || (needs_flag && e.flag.and_then(|s| s.stamp).is_some_and(|s| s >= p))
             }
             None => {
+                // first state: every discovered entity, unless its data is known stale
                 let t = if needs_flag { rt } else { st };
-                Sample::fresh(&e.pose, now, t).is_some()
+                e.pose.is_none() || Sample::fresh(&e.pose, now, t).is_some()
             }
         };
         Some(

@@ -1,1 +1,47 @@
-fn main() {}
+//! `sim_bridge` binary: parse ROS 2 arguments, run the bridge until Ctrl-C / SIGTERM or
+//! `max_steps`.
+
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
+
+use msgs::rosargs::ArgError;
+use sim_bridge::params;
+
+fn main() {
+    let env_domain = std::env::var("ROS_DOMAIN_ID").ok();
+    let (p, warnings) = match params::parse(std::env::args().skip(1), env_domain.as_deref()) {
+        Ok(x) => x,
+        Err(ArgError::Help) => {
+            println!("{}", params::USAGE);
+            std::process::exit(0);
+        }
+        Err(e) => {
+            eprintln!("sim_bridge: error: {e}\n{}", params::USAGE);
+            std::process::exit(2);
+        }
+    };
+    let filter = tracing_subscriber::EnvFilter::try_from_default_env().unwrap_or_else(|_| {
+        let lvl = p.log_level.as_deref().unwrap_or("info");
+        tracing_subscriber::EnvFilter::new(format!("{lvl},rustdds=warn,ros2_client=warn"))
+    });
+    tracing_subscriber::fmt()
+        .with_env_filter(filter)
+        .with_writer(std::io::stderr)
+        .with_ansi(std::io::IsTerminal::is_terminal(&std::io::stderr()))
+        .init();
+    for w in &warnings {
+        tracing::warn!("{w}");
+    }
+    let stop = Arc::new(AtomicBool::new(false));
+    {
+        let stop = stop.clone();
+        if let Err(e) = ctrlc::set_handler(move || stop.store(true, Ordering::SeqCst)) {
+            eprintln!("sim_bridge: error: cannot install the signal handler: {e}");
+            std::process::exit(1);
+        }
+    }
+    if let Err(e) = sim_bridge::node::run(p, &stop) {
+        tracing::error!("{e:#}");
+        std::process::exit(1);
+    }
+}

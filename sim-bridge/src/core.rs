@@ -1,0 +1,647 @@
+//! The DDS-free bridge: simulator, robot bodies by name, commands, staleness, lockstep
+//! bookkeeping, run-time commands, metrics. `node` moves messages in and out of it.
+
+use std::collections::{BTreeMap, HashMap};
+
+use msgs::{
+    ColorRGBA, DiagnosticArray, DiagnosticStatus, Header, KeyValue, Marker, MarkerArray, Pose,
+    Time, Twist, Vector3,
+};
+use serde::Serialize;
+use sim::{Env, MachineId, RobotId, ScenarioConfig, StorageId};
+
+use crate::params::{BridgeParams, Mode};
+
+/// A robot body and the latest command for it.
+#[derive(Debug, Clone)]
+pub struct RobotSlot {
+    pub id: RobotId,
+    pub cmd: [f32; 2],
+    /// Stamp key (us) of the state the latest command answers (its DDS source timestamp).
+    pub cmd_stamp: Option<i64>,
+    /// Wall time of the latest valid command.
+    pub last_cmd_at: Option<f64>,
+    pub created_at: f64,
+    /// Spawned from the setup at start-up (gets the start-up grace period).
+    pub initial: bool,
+}
+
+#[derive(Debug, Clone, Default, Serialize, PartialEq, Eq)]
+pub struct BridgeCounters {
+    pub cmds_accepted: u64,
+    /// NaN / infinite Twists (never reach the simulator).
+    pub cmds_dropped_non_finite: u64,
+    /// Undecodable (wrong-size) Twists.
+    pub cmds_dropped_decode: u64,
+    /// Lockstep: commands answering an older state than the current one.
+    pub cmds_late: u64,
+    /// A first cmd_vel that could not spawn a body (no free spot).
+    pub spawn_failures: u64,
+    pub spawned: u64,
+    pub despawned: u64,
+    /// Lockstep: steps taken before every robot answered.
+    pub lockstep_timeouts: u64,
+    pub commands_ok: u64,
+    pub commands_failed: u64,
+}
+
+/// One metrics line (JSON on stdout, and `/tending/metrics`).
+#[derive(Debug, Clone, Serialize, PartialEq)]
+pub struct MetricsLine {
+    pub step: u32,
+    pub sim_time: f64,
+    pub robots: usize,
+    pub machines: usize,
+    pub storages: usize,
+    pub parts_delivered: u32,
+    pub parts_collected: u32,
+    pub collisions: u32,
+    pub p_max: u32,
+    pub mu: f64,
+    #[serde(flatten)]
+    pub counters: BridgeCounters,
+    #[serde(skip_serializing_if = "std::ops::Not::not")]
+    pub done: bool,
+}
+
+/// What became of a cmd_vel.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum CmdOutcome {
+    Accepted,
+    /// Accepted and a body was spawned for this namespace.
+    Spawned(RobotId),
+    DroppedNonFinite,
+    DroppedLate,
+    SpawnFailed(String),
+}
+
+pub struct Core {
+    pub env: Env,
+    pub p: BridgeParams,
+    robots: BTreeMap<String, RobotSlot>,
+    names: HashMap<RobotId, String>,
+    pub counters: BridgeCounters,
+    /// Lockstep: stamp key of the last published state, when, and the robots expected to
+    /// answer it.
+    published: Option<(i64, f64, Vec<String>)>,
+}
+
+/// Stamp key (us) of a time, the same rounding the robot nodes apply.
+pub fn key_of(t: &Time) -> i64 {
+    msgs::dds::stamp_key_time(t)
+}
+
+impl Core {
+    pub fn new(p: BridgeParams, now: f64) -> anyhow::Result<Self> {
+        let cfg = match &p.config {
+            Some(path) => ScenarioConfig::load(path)
+                .map_err(|e| anyhow::anyhow!("scenario config {}: {e}", path.display()))?,
+            None => ScenarioConfig::default(),
+        };
+        let mut env = Env::new(cfg, p.setup, p.seed)?;
+        let mut robots = BTreeMap::new();
+        let mut names = HashMap::new();
+        let ids: Vec<RobotId> = env.robot_ids().to_vec();
+        if p.spawn_initial {
+            for (i, id) in ids.iter().enumerate() {
+                let name = format!("robot_{i}");
+                names.insert(*id, name.clone());
+                robots.insert(
+                    name,
+                    RobotSlot {
+                        id: *id,
+                        cmd: [0.0; 2],
+                        cmd_stamp: None,
+                        last_cmd_at: None,
+                        created_at: now,
+                        initial: true,
+                    },
+                );
+            }
+        } else {
+            for id in ids {
+                env.remove_robot(id)?;
+            }
+        }
+        Ok(Self {
+            env,
+            p,
+            robots,
+            names,
+            counters: BridgeCounters::default(),
+            published: None,
+        })
+    }
+
+    pub fn sim_time(&self) -> f64 {
+        self.env.steps() as f64 * self.env.config().world.dt as f64
+    }
+    pub fn stamp(&self) -> Time {
+        Time::from_secs_f64(self.sim_time())
+    }
+    pub fn stamp_key(&self) -> i64 {
+        key_of(&self.stamp())
+    }
+    pub fn robot_names(&self) -> impl Iterator<Item = &String> {
+        self.robots.keys()
+    }
+    pub fn has_robot(&self, name: &str) -> bool {
+        self.robots.contains_key(name)
+    }
+    pub fn done(&self) -> bool {
+        self.p.max_steps > 0 && self.env.steps() as u64 >= self.p.max_steps
+    }
+
+    /// A cmd_vel from namespace `name` (without slash), stamped `stamp` (source timestamp
+    /// key), received at wall time `now`.
+    pub fn on_cmd(&mut self, name: &str, t: &Twist, stamp: Option<i64>, now: f64) -> CmdOutcome {
+        if msgs::validate::twist(t).is_err() {
+            self.counters.cmds_dropped_non_finite += 1;
+            return CmdOutcome::DroppedNonFinite;
+        }
+        let v = [t.linear.x as f32, t.linear.y as f32];
+        if !(v[0].is_finite() && v[1].is_finite()) {
+            self.counters.cmds_dropped_non_finite += 1;
+            return CmdOutcome::DroppedNonFinite;
+        }
+        let mut outcome = CmdOutcome::Accepted;
+        if !self.robots.contains_key(name) {
+            match self.spawn(name, None, now) {
+                Ok(id) => outcome = CmdOutcome::Spawned(id),
+                Err(e) => {
+                    self.counters.spawn_failures += 1;
+                    return CmdOutcome::SpawnFailed(e);
+                }
+            }
+        }
+        if self.p.mode == Mode::Lockstep {
+            if let Some((key, _, _)) = &self.published {
+                if stamp.is_some_and(|s| s < *key) {
+                    self.counters.cmds_late += 1;
+                    // still proof of life
+                    if let Some(slot) = self.robots.get_mut(name) {
+                        slot.last_cmd_at = Some(now);
+                    }
+                    return CmdOutcome::DroppedLate;
+                }
+            }
+        }
+        let slot = self.robots.get_mut(name).expect("present or spawned");
+        slot.cmd = v;
+        slot.cmd_stamp = stamp;
+        slot.last_cmd_at = Some(now);
+        self.counters.cmds_accepted += 1;
+        outcome
+    }
+
+    pub fn on_undecodable_cmd(&mut self) {
+        self.counters.cmds_dropped_decode += 1;
+    }
+
+    fn spawn(&mut self, name: &str, pos: Option<[f32; 2]>, now: f64) -> Result<RobotId, String> {
+        let id = self.env.add_robot(pos).map_err(|e| e.to_string())?;
+        self.names.insert(id, name.to_string());
+        self.robots.insert(
+            name.to_string(),
+            RobotSlot {
+                id,
+                cmd: [0.0; 2],
+                cmd_stamp: None,
+                last_cmd_at: None,
+                created_at: now,
+                initial: false,
+            },
+        );
+        self.counters.spawned += 1;
+        Ok(id)
+    }
+
+    fn despawn(&mut self, name: &str) -> Result<(), String> {
+        let slot = self
+            .robots
+            .remove(name)
+            .ok_or_else(|| format!("no robot `{name}`"))?;
+        self.names.remove(&slot.id);
+        self.env.remove_robot(slot.id).map_err(|e| e.to_string())?;
+        self.counters.despawned += 1;
+        Ok(())
+    }
+
+    /// Remove bodies whose cmd_vel is stale; returns their names.
+    pub fn expire(&mut self, now: f64) -> Vec<String> {
+        let stale = self.p.stale_timeout_s;
+        let grace = self.p.startup_grace_s.max(stale);
+        let gone: Vec<String> = self
+            .robots
+            .iter()
+            .filter(|(_, s)| {
+                let deadline = match s.last_cmd_at {
+                    Some(t) => t + stale,
+                    None if s.initial => s.created_at + grace,
+                    None => s.created_at + stale,
+                };
+                now > deadline
+            })
+            .map(|(n, _)| n.clone())
+            .collect();
+        for n in &gone {
+            let _ = self.despawn(n);
+        }
+        gone
+    }
+
+    /// Lockstep: the current state was published at wall time `now`.
+    pub fn mark_published(&mut self, now: f64) {
+        let names = self.robots.keys().cloned().collect();
+        self.published = Some((self.stamp_key(), now, names));
+    }
+
+    /// Lockstep: (every expected robot answered the published state, the wait timed out).
+    pub fn lockstep_status(&self, now: f64) -> (bool, bool) {
+        let Some((key, at, expected)) = &self.published else {
+            return (false, false);
+        };
+        let all = expected.iter().all(|n| match self.robots.get(n) {
+            None => true, // removed meanwhile
+            Some(s) => s.cmd_stamp == Some(*key),
+        });
+        (all, now - at > self.p.lockstep_timeout_s)
+    }
+
+    /// One simulator step with the current commands. Lockstep: a robot's command counts
+    /// only if it answers the published state (else zero); realtime: the latest command
+    /// unless older than the stale timeout.
+    pub fn step(&mut self, now: f64, timed_out: bool) -> anyhow::Result<()> {
+        if timed_out {
+            self.counters.lockstep_timeouts += 1;
+        }
+        let key = self.published.as_ref().map(|p| p.0);
+        let cmds: Vec<[f32; 2]> = self
+            .env
+            .robot_ids()
+            .iter()
+            .map(|id| {
+                let s = &self.robots[&self.names[id]];
+                let ok = match self.p.mode {
+                    Mode::Lockstep => key.is_some() && s.cmd_stamp == key,
+                    Mode::Realtime => s
+                        .last_cmd_at
+                        .is_some_and(|t| now - t <= self.p.stale_timeout_s),
+                };
+                if ok {
+                    s.cmd
+                } else {
+                    [0.0; 2]
+                }
+            })
+            .collect();
+        self.env.step_velocities(&cmds)?;
+        Ok(())
+    }
+
+    /// A `/tending/command` line; returns a description of what was done.
+    pub fn apply_command(&mut self, line: &str, now: f64) -> Result<String, String> {
+        let r = self.apply_command_inner(line, now);
+        match &r {
+            Ok(_) => self.counters.commands_ok += 1,
+            Err(_) => self.counters.commands_failed += 1,
+        }
+        r
+    }
+
+    fn apply_command_inner(&mut self, line: &str, now: f64) -> Result<String, String> {
+        let w: Vec<&str> = line.split_whitespace().collect();
+        let pos = |a: &[&str]| -> Result<Option<[f32; 2]>, String> {
+            match a {
+                [] => Ok(None),
+                [x, y] => {
+                    let x: f32 = x.parse().map_err(|_| format!("bad x `{x}`"))?;
+                    let y: f32 = y.parse().map_err(|_| format!("bad y `{y}`"))?;
+                    if x.is_finite() && y.is_finite() {
+                        Ok(Some([x, y]))
+                    } else {
+                        Err("position must be finite".into())
+                    }
+                }
+                _ => Err("expected no position or `x y`".into()),
+            }
+        };
+        let id = |a: &[&str]| -> Result<u32, String> {
+            match a {
+                [i] => i.parse().map_err(|_| format!("bad id `{i}`")),
+                _ => Err("expected one id".into()),
+            }
+        };
+        match w.as_slice() {
+            ["add_machine", rest @ ..] => {
+                let m = self
+                    .env
+                    .add_machine(pos(rest)?)
+                    .map_err(|e| e.to_string())?;
+                Ok(format!("added machine_{}", m.0))
+            }
+            ["remove_machine", rest @ ..] => {
+                let j = id(rest)?;
+                self.env
+                    .remove_machine(MachineId(j))
+                    .map_err(|e| e.to_string())?;
+                Ok(format!("removed machine_{j}"))
+            }
+            ["add_storage", rest @ ..] => {
+                let s = self
+                    .env
+                    .add_storage(pos(rest)?)
+                    .map_err(|e| e.to_string())?;
+                Ok(format!("added storage_{}", s.0))
+            }
+            ["remove_storage", rest @ ..] => {
+                let k = id(rest)?;
+                self.env
+                    .remove_storage(StorageId(k))
+                    .map_err(|e| e.to_string())?;
+                Ok(format!("removed storage_{k}"))
+            }
+            ["add_robot", name, rest @ ..] => {
+                if !valid_name(name) || self.robots.contains_key(*name) {
+                    return Err(format!("robot name `{name}` is invalid or taken"));
+                }
+                let id = self.spawn(name, pos(rest)?, now)?;
+                Ok(format!("added {name} (body {})", id.0))
+            }
+            ["remove_robot", name] => {
+                self.despawn(name)?;
+                Ok(format!("removed {name}"))
+            }
+            _ => Err(format!("unknown command `{line}`")),
+        }
+    }
+
+    pub fn metrics(&self) -> MetricsLine {
+        let m = self.env.metrics();
+        let c = self.env.counts();
+        MetricsLine {
+            step: self.env.steps(),
+            sim_time: self.sim_time(),
+            robots: c.robots,
+            machines: c.machines,
+            storages: c.storages,
+            parts_delivered: m.parts_delivered,
+            parts_collected: m.parts_collected,
+            collisions: m.collisions,
+            p_max: m.p_max,
+            mu: m.utilization(),
+            counters: self.counters.clone(),
+            done: self.done(),
+        }
+    }
+
+    /// Robots by name: position and has_part.
+    pub fn robot_states(&self) -> Vec<(String, [f32; 2], bool)> {
+        self.env
+            .robots()
+            .map(|r| (self.names[&r.id].clone(), r.pos, r.has_part))
+            .collect()
+    }
+
+    pub fn diagnostics(&self) -> DiagnosticArray {
+        let m = self.metrics();
+        let kv = |k: &str, v: String| KeyValue {
+            key: k.into(),
+            value: v,
+        };
+        DiagnosticArray {
+            header: Header {
+                stamp: self.stamp(),
+                frame_id: String::new(),
+            },
+            status: vec![DiagnosticStatus {
+                level: DiagnosticStatus::OK,
+                name: "tending/metrics".into(),
+                message: format!(
+                    "{} delivered, MU {:.3}, {} collisions",
+                    m.parts_delivered, m.mu, m.collisions
+                ),
+                hardware_id: "sim_bridge".into(),
+                values: vec![
+                    kv("parts_delivered", m.parts_delivered.to_string()),
+                    kv("parts_collected", m.parts_collected.to_string()),
+                    kv("collisions", m.collisions.to_string()),
+                    kv("machine_utilization", format!("{:.4}", m.mu)),
+                    kv("p_max", m.p_max.to_string()),
+                    kv("robots", m.robots.to_string()),
+                    kv("step", m.step.to_string()),
+                    kv(
+                        "lockstep_timeouts",
+                        m.counters.lockstep_timeouts.to_string(),
+                    ),
+                    kv(
+                        "cmds_dropped",
+                        (m.counters.cmds_dropped_non_finite + m.counters.cmds_dropped_decode)
+                            .to_string(),
+                    ),
+                ],
+            }],
+        }
+    }
+
+    /// Robots red cylinders, machines green cubes (dimmer when no part is ready), storages
+    /// blue cubes, as in the paper's figures. DELETEALL first so removed bodies vanish.
+    pub fn markers(&self) -> MarkerArray {
+        let header = Header {
+            stamp: self.stamp(),
+            frame_id: msgs::topics::FRAME_ID.into(),
+        };
+        let mut markers = vec![Marker {
+            header: header.clone(),
+            action: Marker::DELETEALL,
+            ..Default::default()
+        }];
+        let mk = |ns: &str, id: u32, ty: i32, c: [f32; 2], scale: [f64; 3], color: ColorRGBA| {
+            let mut pose = Pose::default();
+            pose.position.x = c[0] as f64;
+            pose.position.y = c[1] as f64;
+            pose.position.z = scale[2] / 2.0;
+            Marker {
+                header: header.clone(),
+                ns: ns.into(),
+                id: id as i32,
+                type_: ty,
+                action: Marker::ADD,
+                pose,
+                scale: Vector3 {
+                    x: scale[0],
+                    y: scale[1],
+                    z: scale[2],
+                },
+                color,
+                ..Default::default()
+            }
+        };
+        let rgba = |r, g, b, a| ColorRGBA { r, g, b, a };
+        let d = 2.0 * self.env.sizes().robot_radius as f64;
+        for r in self.env.robots() {
+            let c = if r.has_part {
+                rgba(1.0, 0.5, 0.5, 1.0)
+            } else {
+                rgba(0.9, 0.1, 0.1, 1.0)
+            };
+            markers.push(mk(
+                "robots",
+                r.id.0,
+                Marker::CYLINDER,
+                r.pos,
+                [d, d, 0.1],
+                c,
+            ));
+        }
+        for m in self.env.machines() {
+            let c = if m.part_ready {
+                rgba(0.1, 0.8, 0.1, 1.0)
+            } else {
+                rgba(0.1, 0.5, 0.1, 0.6)
+            };
+            let s = [2.0 * m.half[0] as f64, 2.0 * m.half[1] as f64, 0.2];
+            markers.push(mk("machines", m.id.0, Marker::CUBE, m.centre, s, c));
+        }
+        for s in self.env.storages() {
+            let sc = [2.0 * s.half[0] as f64, 2.0 * s.half[1] as f64, 0.05];
+            markers.push(mk(
+                "storages",
+                s.id.0,
+                Marker::CUBE,
+                s.centre,
+                sc,
+                rgba(0.1, 0.2, 0.9, 1.0),
+            ));
+        }
+        MarkerArray { markers }
+    }
+}
+
+fn valid_name(s: &str) -> bool {
+    !s.is_empty()
+        && !s.as_bytes()[0].is_ascii_digit()
+        && s.bytes().all(|b| b.is_ascii_alphanumeric() || b == b'_')
+        && !s.starts_with("machine_")
+        && !s.starts_with("storage_")
+        && s != "tending"
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn core(mode: Mode) -> Core {
+        let p = BridgeParams {
+            mode,
+            stale_timeout_s: 1.0,
+            startup_grace_s: 5.0,
+            ..BridgeParams::default()
+        };
+        Core::new(p, 0.0).unwrap()
+    }
+
+    #[test]
+    fn initial_robots_are_named_and_get_a_grace_period() {
+        let mut c = core(Mode::Realtime);
+        let names: Vec<_> = c.robot_names().cloned().collect();
+        assert_eq!(names.len(), 6);
+        assert!(c.has_robot("robot_0") && c.has_robot("robot_5"));
+        assert!(c.expire(4.9).is_empty());
+        c.on_cmd("robot_0", &Twist::planar(0.1, 0.0), None, 5.0);
+        let gone = c.expire(5.5);
+        assert_eq!(gone.len(), 5);
+        assert_eq!(c.env.n_robots(), 1);
+        assert!(c.expire(5.9).is_empty());
+        assert_eq!(c.expire(6.01).len(), 1);
+        assert_eq!(c.counters.despawned, 6);
+    }
+
+    #[test]
+    fn first_cmd_spawns_invalid_cmds_never_reach_the_sim() {
+        let mut c = core(Mode::Realtime);
+        let o = c.on_cmd("rover", &Twist::planar(0.5, 0.0), None, 0.0);
+        assert!(matches!(o, CmdOutcome::Spawned(_)));
+        assert_eq!(c.env.n_robots(), 7);
+        let before: Vec<_> = c.robot_states();
+        let nan = Twist::planar(f64::NAN, 0.0);
+        assert_eq!(
+            c.on_cmd("rover", &nan, None, 0.1),
+            CmdOutcome::DroppedNonFinite
+        );
+        assert_eq!(
+            c.on_cmd("ghost", &Twist::planar(f64::INFINITY, 0.0), None, 0.1),
+            CmdOutcome::DroppedNonFinite
+        );
+        assert_eq!(c.env.n_robots(), 7, "a bad first cmd spawns nothing");
+        c.on_undecodable_cmd();
+        assert_eq!(c.counters.cmds_dropped_non_finite, 2);
+        assert_eq!(c.counters.cmds_dropped_decode, 1);
+        c.step(0.1, false).unwrap();
+        // the rover moved right with its last valid command
+        let after = c.robot_states();
+        let rx = |v: &Vec<(String, [f32; 2], bool)>| v.iter().find(|r| r.0 == "rover").unwrap().1;
+        assert!(rx(&after)[0] > rx(&before)[0]);
+        assert!(after.iter().all(|r| r.1[0].is_finite()));
+    }
+
+    #[test]
+    fn lockstep_waits_for_every_answer_and_ignores_late_ones() {
+        let mut c = core(Mode::Lockstep);
+        c.mark_published(0.0);
+        let k0 = c.stamp_key();
+        assert_eq!(c.lockstep_status(0.1), (false, false));
+        for i in 0..5 {
+            c.on_cmd(
+                &format!("robot_{i}"),
+                &Twist::planar(0.5, 0.0),
+                Some(k0),
+                0.1,
+            );
+        }
+        assert_eq!(c.lockstep_status(0.2), (false, false));
+        assert_eq!(c.lockstep_status(2.5), (false, true));
+        c.on_cmd("robot_5", &Twist::planar(0.0, 0.5), Some(k0), 0.3);
+        assert!(c.lockstep_status(0.3).0);
+        c.step(0.3, false).unwrap();
+        c.mark_published(0.3);
+        // an answer to the old state is late, not an answer to the new one
+        assert_eq!(
+            c.on_cmd("robot_0", &Twist::planar(0.5, 0.0), Some(k0), 0.4),
+            CmdOutcome::DroppedLate
+        );
+        assert!(!c.lockstep_status(0.4).0);
+        assert_eq!(c.stamp_key(), 100_000);
+    }
+
+    #[test]
+    fn run_time_commands() {
+        let mut c = core(Mode::Realtime);
+        assert_eq!(
+            c.apply_command("add_machine", 0.0).unwrap(),
+            "added machine_4"
+        );
+        assert_eq!(c.env.counts().machines, 5);
+        c.apply_command("remove_machine 0", 0.0).unwrap();
+        assert!(c.apply_command("remove_machine 0", 0.0).is_err());
+        c.apply_command("add_storage", 0.0).unwrap();
+        c.apply_command("remove_storage 1", 0.0).unwrap();
+        assert_eq!(c.env.counts().storages, 2);
+        c.apply_command("remove_robot robot_3", 0.0).unwrap();
+        assert!(!c.has_robot("robot_3"));
+        assert!(c.apply_command("add_robot machine_9", 0.0).is_err());
+        assert!(c.apply_command("fly", 0.0).is_err());
+        assert!(c.apply_command("add_machine 0.1", 0.0).is_err());
+        assert_eq!(c.counters.commands_failed, 4);
+        let m = c.markers();
+        assert_eq!(m.markers[0].action, Marker::DELETEALL);
+        assert_eq!(m.markers.len(), 1 + 5 + 4 + 2);
+        let robots = m.markers.iter().filter(|x| x.ns == "robots").count();
+        assert_eq!(robots, 5);
+        let json = serde_json::to_string(&c.metrics()).unwrap();
+        assert!(
+            json.contains("\"robots\":5") && json.contains("\"mu\""),
+            "{json}"
+        );
+    }
+}

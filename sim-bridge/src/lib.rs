@@ -1,0 +1,18 @@
+//! `sim_bridge`: the tending simulator behind the ROS 2 contract (DESIGN.md).
+//!
+//! - [`params`]: ROS 2 command-line parameters (`msgs::rosargs` conventions);
+//! - [`core`]: DDS-free logic: bodies by namespace, cmd_vel validation, spawn on first
+//!   command, despawn when stale, lockstep bookkeeping, `/tending/command`, metrics,
+//!   markers;
+//! - [`node`]: the ros2-client node (per-entity publishers, cmd_vel discovery, step loop).
+//!
+//! Run-time commands on `/tending/command` (std_msgs/String): `add_machine [x y]`,
+//! `remove_machine <id>`, `add_storage [x y]`, `remove_storage <id>`,
+//! `add_robot <name> [x y]`, `remove_robot <name>`.
+//!
+//! stdout carries one JSON metrics line per `metrics_period_s` (and a last one on exit);
+//! logs go to stderr.
+
+pub mod core;
+pub mod node;
+pub mod params;

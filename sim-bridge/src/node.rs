@@ -1,0 +1,402 @@
+//! The DDS side of the bridge: publishers per entity, cmd_vel discovery, the step loop.
+#![allow(clippy::map_entry)] // writers are created fallibly before insertion
+
+use std::collections::{BTreeMap, HashMap};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::{Duration, Instant};
+
+use anyhow::{anyhow, Context as _};
+use ros2_client::dds::rustdds::mio1::{Events, Interest, Poll, Token};
+use ros2_client::dds::{Context, ContextOptions, Node, Publisher, Subscription};
+use ros2_client::{Name, NodeName, NodeOptions};
+use tracing::{info, warn};
+
+use msgs::dds::{stamp_key_info, StampedWriter};
+use msgs::topics::{self, machine, robot, storage, Entity, Leaf};
+use msgs::{
+    Bool, Clock, DiagnosticArray, MarkerArray, PoseStamped, Profile, RosMessage, StdString, Twist,
+};
+
+use crate::core::{Core, MetricsLine};
+use crate::params::{BridgeParams, Mode};
+
+fn dds_err<E: std::fmt::Debug>(what: &str) -> impl FnOnce(E) -> anyhow::Error + '_ {
+    move |e| anyhow!("{what}: {e:?}")
+}
+
+fn publisher<M: RosMessage>(
+    node: &mut Node,
+    name: &str,
+    profile: Profile,
+) -> anyhow::Result<Publisher<M>> {
+    let qos = profile.qos();
+    let t = node
+        .create_topic(
+            &Name::parse(name).map_err(dds_err("topic name"))?,
+            M::type_name(),
+            &qos,
+        )
+        .map_err(dds_err("create topic"))?;
+    node.create_publisher(&t, Some(qos))
+        .map_err(dds_err("create publisher"))
+}
+
+fn subscription<M: RosMessage>(
+    node: &mut Node,
+    name: &str,
+    profile: Profile,
+) -> anyhow::Result<Subscription<M>> {
+    let qos = profile.qos();
+    let t = node
+        .create_topic(
+            &Name::parse(name).map_err(dds_err("topic name"))?,
+            M::type_name(),
+            &qos,
+        )
+        .map_err(dds_err("create topic"))?;
+    node.create_subscription(&t, Some(qos))
+        .map_err(dds_err("create subscription"))
+}
+
+struct EntityWriters {
+    pose: StampedWriter<PoseStamped>,
+    flag: Option<StampedWriter<Bool>>,
+}
+
+const COMMAND_TOKEN: Token = Token(usize::MAX - 1);
+
+/// Run until `stop` is set or `max_steps` is reached; returns the last metrics.
+pub fn run(p: BridgeParams, stop: &AtomicBool) -> anyhow::Result<MetricsLine> {
+    let t0 = Instant::now();
+    let now_s = || t0.elapsed().as_secs_f64();
+    let mut core = Core::new(p.clone(), 0.0)?;
+    let ctx = Context::with_options(ContextOptions::new().domain_id(p.domain_id))
+        .map_err(dds_err("DDS context"))?;
+    let mut node = ctx
+        .new_node(
+            NodeName::new(&p.namespace, &p.node_name).map_err(dds_err("node name"))?,
+            NodeOptions::new().enable_rosout(p.enable_rosout),
+        )
+        .map_err(dds_err("create node"))?;
+    let spinner = node.spinner().map_err(dds_err("spinner"))?;
+    let spin_thread = std::thread::Builder::new()
+        .name("ros2-spinner".into())
+        .spawn(move || {
+            if let Err(e) = smol::block_on(spinner.spin()) {
+                warn!("spinner stopped with error: {e:?}");
+            }
+        })?;
+    let r = event_loop(&p, stop, &ctx, &mut node, &mut core, &now_s);
+    drop(node);
+    let _ = spin_thread.join();
+    r
+}
+
+fn event_loop(
+    p: &BridgeParams,
+    stop: &AtomicBool,
+    ctx: &Context,
+    node: &mut Node,
+    core: &mut Core,
+    now_s: &dyn Fn() -> f64,
+) -> anyhow::Result<MetricsLine> {
+    let clock_pub: Publisher<Clock> = publisher(node, topics::CLOCK, Profile::Clock)?;
+    let markers_pub: Publisher<MarkerArray> =
+        publisher(node, topics::MARKERS, Profile::Visualization)?;
+    let metrics_pub: Publisher<DiagnosticArray> =
+        publisher(node, topics::METRICS, Profile::Visualization)?;
+
+    let mut poll = Poll::new().context("mio poll")?;
+    let mut events = Events::with_capacity(256);
+    let mut command_sub: Subscription<StdString> =
+        subscription(node, topics::COMMAND, Profile::RobotStream)?;
+    poll.registry()
+        .register(&mut command_sub, COMMAND_TOKEN, Interest::READABLE)?;
+
+    let mut cmd_subs: Vec<(String, Subscription<Twist>)> = Vec::new();
+    let mut robots_w: BTreeMap<String, EntityWriters> = BTreeMap::new();
+    let mut machines_w: HashMap<u32, EntityWriters> = HashMap::new();
+    let mut storages_w: HashMap<u32, EntityWriters> = HashMap::new();
+
+    let subscribe_cmd = |node: &mut Node,
+                         poll: &Poll,
+                         subs: &mut Vec<(String, Subscription<Twist>)>,
+                         name: &str|
+     -> anyhow::Result<()> {
+        if subs.iter().any(|(n, _)| n == name) {
+            return Ok(());
+        }
+        let mut s: Subscription<Twist> = subscription(
+            node,
+            &robot(name, Leaf::CmdVel).ros_name(),
+            Profile::RobotStream,
+        )?;
+        poll.registry()
+            .register(&mut s, Token(subs.len()), Interest::READABLE)?;
+        subs.push((name.to_string(), s));
+        Ok(())
+    };
+    let initial: Vec<String> = core.robot_names().cloned().collect();
+    for n in &initial {
+        subscribe_cmd(node, &poll, &mut cmd_subs, n)?;
+    }
+
+    // Publish the current state on every entity topic (creating/dropping writers as
+    // entities come and go), then markers, metrics and /clock last.
+    let publish_state = |core: &Core,
+                         node: &Node,
+                         robots_w: &mut BTreeMap<String, EntityWriters>,
+                         machines_w: &mut HashMap<u32, EntityWriters>,
+                         storages_w: &mut HashMap<u32, EntityWriters>|
+     -> anyhow::Result<()> {
+        let stamp = core.stamp();
+        let ns = stamp.sec as i64 * 1_000_000_000 + stamp.nanosec as i64;
+        let pose =
+            |c: [f32; 2]| PoseStamped::planar(stamp, topics::FRAME_ID, c[0] as f64, c[1] as f64);
+        let states = core.robot_states();
+        robots_w.retain(|n, _| states.iter().any(|s| &s.0 == n));
+        for (name, pos, has_part) in &states {
+            if !robots_w.contains_key(name) {
+                let w = EntityWriters {
+                    pose: StampedWriter::new(
+                        ctx,
+                        node,
+                        &robot(name, Leaf::Pose).ros_name(),
+                        Profile::RobotStream,
+                    )
+                    .map_err(|e| anyhow!(e))?,
+                    flag: Some(
+                        StampedWriter::new(
+                            ctx,
+                            node,
+                            &robot(name, Leaf::HasPart).ros_name(),
+                            Profile::RobotStream,
+                        )
+                        .map_err(|e| anyhow!(e))?,
+                    ),
+                };
+                robots_w.insert(name.clone(), w);
+            }
+            let w = &robots_w[name];
+            // flag first, then the pose (robot nodes key everything on the stamp anyway)
+            if let Some(f) = &w.flag {
+                let _ = f.write(Bool { data: *has_part }, Some(ns));
+            }
+            let _ = w.pose.write(pose(*pos), Some(ns));
+        }
+        let ms: Vec<_> = core.env.machines().collect();
+        machines_w.retain(|j, _| ms.iter().any(|m| m.id.0 == *j));
+        for m in &ms {
+            let j = m.id.0;
+            if !machines_w.contains_key(&j) {
+                let w = EntityWriters {
+                    pose: StampedWriter::new(
+                        ctx,
+                        node,
+                        &machine(j, Leaf::Pose).ros_name(),
+                        Profile::LatchedPose,
+                    )
+                    .map_err(|e| anyhow!(e))?,
+                    flag: Some(
+                        StampedWriter::new(
+                            ctx,
+                            node,
+                            &machine(j, Leaf::PartReady).ros_name(),
+                            Profile::PartReady,
+                        )
+                        .map_err(|e| anyhow!(e))?,
+                    ),
+                };
+                machines_w.insert(j, w);
+            }
+            let w = &machines_w[&j];
+            if let Some(f) = &w.flag {
+                let _ = f.write(Bool { data: m.part_ready }, Some(ns));
+            }
+            let _ = w.pose.write(pose(m.centre), Some(ns));
+        }
+        let ss: Vec<_> = core.env.storages().collect();
+        storages_w.retain(|k, _| ss.iter().any(|s| s.id.0 == *k));
+        for s in &ss {
+            let k = s.id.0;
+            if !storages_w.contains_key(&k) {
+                let w = EntityWriters {
+                    pose: StampedWriter::new(
+                        ctx,
+                        node,
+                        &storage(k, Leaf::Pose).ros_name(),
+                        Profile::LatchedPose,
+                    )
+                    .map_err(|e| anyhow!(e))?,
+                    flag: None,
+                };
+                storages_w.insert(k, w);
+            }
+            let _ = storages_w[&k].pose.write(pose(s.centre), Some(ns));
+        }
+        let _ = markers_pub.publish(core.markers());
+        let _ = metrics_pub.publish(core.diagnostics());
+        let _ = clock_pub.publish(Clock { clock: stamp });
+        Ok(())
+    };
+
+    let print_metrics = |m: &MetricsLine| {
+        if let Ok(s) = serde_json::to_string(m) {
+            println!("{s}");
+        }
+    };
+
+    let period = Duration::from_secs_f64(1.0 / p.rate_hz);
+    let t_start = Instant::now();
+    let mut next_tick = t_start;
+    let mut next_discovery = t_start;
+    let metrics_period = Duration::from_secs_f64(p.metrics_period_s);
+    let mut next_metrics = t_start + metrics_period;
+    // lockstep start: when every initial robot's cmd_vel was discovered (+ settle)
+    let mut all_discovered_at: Option<Instant> = if initial.is_empty() {
+        Some(t_start)
+    } else {
+        None
+    };
+    let mut started = p.mode == Mode::Realtime;
+
+    info!(
+        "sim_bridge up: setup {}, seed {}, mode {:?}, {} Hz, {} robots",
+        p.setup,
+        p.seed,
+        p.mode,
+        p.rate_hz,
+        core.env.n_robots()
+    );
+    if p.mode == Mode::Realtime {
+        publish_state(core, node, &mut robots_w, &mut machines_w, &mut storages_w)?;
+    }
+
+    while !stop.load(Ordering::SeqCst) {
+        let now = Instant::now();
+        let mut deadline = next_discovery
+            .min(next_metrics)
+            .min(now + Duration::from_millis(50));
+        if p.mode == Mode::Realtime {
+            deadline = deadline.min(next_tick);
+        }
+        if let Err(e) = poll.poll(&mut events, Some(deadline.saturating_duration_since(now))) {
+            if e.kind() != std::io::ErrorKind::Interrupted {
+                return Err(e).context("mio poll");
+            }
+        }
+        let t = now_s();
+
+        // ---- commands in
+        for (name, sub) in &cmd_subs {
+            for _ in 0..1000 {
+                match sub.take() {
+                    Ok(Some((tw, info))) => {
+                        let o = core.on_cmd(name, &tw, stamp_key_info(&info), t);
+                        if let crate::core::CmdOutcome::Spawned(id) = o {
+                            info!("spawned a body (id {}) for /{name}", id.0);
+                        }
+                    }
+                    Ok(None) => break,
+                    Err(_) => core.on_undecodable_cmd(),
+                }
+            }
+        }
+        while let Ok(Some((line, _))) = command_sub.take() {
+            match core.apply_command(&line.data, t) {
+                Ok(s) => info!("command `{}`: {s}", line.data),
+                Err(e) => warn!("command `{}` refused: {e}", line.data),
+            }
+        }
+
+        // ---- discovery of cmd_vel topics
+        if Instant::now() >= next_discovery {
+            next_discovery = Instant::now() + Duration::from_secs_f64(p.discovery_period_s);
+            for d in ctx.discovered_topics() {
+                let Some(topic) = topics::parse_topic(&d.name) else {
+                    continue;
+                };
+                if topic.leaf != Leaf::CmdVel || d.type_name != Twist::DEF.dds_name() {
+                    continue;
+                }
+                if let Entity::Robot(name) = &topic.entity {
+                    if !cmd_subs.iter().any(|(n, _)| n == name) {
+                        match subscribe_cmd(node, &poll, &mut cmd_subs, name) {
+                            Ok(()) => info!("discovered /{name}/cmd_vel"),
+                            Err(e) => warn!("cannot subscribe to /{name}/cmd_vel: {e:#}"),
+                        }
+                    }
+                }
+            }
+            if all_discovered_at.is_none() {
+                let found: Vec<String> = ctx
+                    .discovered_topics()
+                    .iter()
+                    .filter_map(|d| topics::parse_topic(&d.name))
+                    .filter(|t| t.leaf == Leaf::CmdVel)
+                    .map(|t| t.entity.namespace())
+                    .collect();
+                if initial
+                    .iter()
+                    .all(|n| found.iter().any(|f| f.trim_start_matches('/') == n))
+                {
+                    info!("every initial robot's cmd_vel discovered");
+                    all_discovered_at = Some(Instant::now());
+                }
+            }
+        }
+
+        // ---- step
+        match p.mode {
+            Mode::Realtime => {
+                if Instant::now() >= next_tick {
+                    next_tick += period;
+                    if next_tick < Instant::now() {
+                        next_tick = Instant::now() + period;
+                    }
+                    for n in core.expire(t) {
+                        info!("removed /{n}: cmd_vel stale");
+                    }
+                    core.step(t, false)?;
+                    publish_state(core, node, &mut robots_w, &mut machines_w, &mut storages_w)?;
+                }
+            }
+            Mode::Lockstep => {
+                if !started {
+                    let settled = all_discovered_at
+                        .is_some_and(|a| a.elapsed() >= Duration::from_secs_f64(p.settle_s));
+                    let gave_up = t >= p.startup_grace_s;
+                    if settled || gave_up {
+                        if !settled {
+                            warn!("lockstep start without every initial robot discovered");
+                        }
+                        started = true;
+                        publish_state(core, node, &mut robots_w, &mut machines_w, &mut storages_w)?;
+                        core.mark_published(t);
+                    }
+                } else {
+                    let (all, timed_out) = core.lockstep_status(t);
+                    if all || timed_out {
+                        for n in core.expire(t) {
+                            info!("removed /{n}: cmd_vel stale");
+                        }
+                        core.step(t, !all)?;
+                        publish_state(core, node, &mut robots_w, &mut machines_w, &mut storages_w)?;
+                        core.mark_published(t);
+                    }
+                }
+            }
+        }
+
+        if core.done() {
+            break;
+        }
+        if Instant::now() >= next_metrics {
+            next_metrics += metrics_period;
+            print_metrics(&core.metrics());
+        }
+    }
+    let m = core.metrics();
+    print_metrics(&m);
+    Ok(m)
+}
