@@ -144,10 +144,10 @@ def test_own_pose_values_drive_the_command(ros, node):
     wait_cmd(ros, cmd, RIGHT)
     s.own = [1.0, -0.5]      # east of the machine
     wait_cmd(ros, cmd, LEFT, timeout=5.0)
-    s.own = [0.5, -1.0]      # south of it
+    s.own = [0.5, -0.95]     # south of it
     wait_cmd(ros, cmd, UP, timeout=5.0)
-    s.own = [0.5, -0.5]      # on it: stay (dead band)
-    wait_cmd(ros, cmd, STAY, timeout=5.0)
+    s.own = [-0.5, -0.45]    # back west, slightly north: the larger gap (x) wins
+    wait_cmd(ros, cmd, RIGHT, timeout=5.0)
 
 
 def test_has_part_and_storage_pose(ros, node):
@@ -169,7 +169,8 @@ def test_has_part_and_storage_pose(ros, node):
 
 def test_part_ready_selects_the_machine(ros, node):
     """/machine_<j>/pose and /machine_<j>/part_ready (rclpy -> Rust, transient local depth 1):
-    a second machine is discovered and the ready one is chosen over the nearer one."""
+    a second machine is discovered and the ready one is chosen over the nearer one; with
+    no machine ready the greedy controller stays."""
     cmd = CmdLog(ros, '/robot_0/cmd_vel')
     s = Scene(ros)
     m0 = s.machine(0, (0.0, -0.5), False)   # nearer (0.5 m east), not ready
@@ -180,10 +181,9 @@ def test_part_ready_selects_the_machine(ros, node):
     m1['ready'] = False
     m0['ready'] = True
     wait_cmd(ros, cmd, RIGHT, timeout=5.0)
-    # neither ready: the nearest machine (m0), to wait there
+    # neither ready: stay
     m0['ready'] = False
-    ros.spin_for(1.0)
-    assert planar(cmd.last()) == RIGHT
+    wait_cmd(ros, cmd, STAY, timeout=5.0)
     assert re.search(r'discovered /machine_1/part_ready', p.text())
 
 
@@ -212,8 +212,9 @@ def test_latched_topics_reach_a_late_joining_robot(ros, node):
 
 def test_peer_pose_published_by_rclpy_is_discovered(ros, node):
     """/robot_9/pose + /robot_9/has_part published by rclpy: robot_node finds the peer by
-    topic discovery alone, receives its samples (peers=1 in its counters) and puts it into
-    its observation (the 'controlling' rosout line, read by rclpy on /rosout, counts it)."""
+    topic discovery alone, receives its samples (peers=1 in its counters), puts it into its
+    observation (the 'controlling' rosout line, read by rclpy on /rosout, counts it), and
+    its greedy controller yields the machine to the nearer part-less peer."""
     from rcl_interfaces.msg import Log
     logs = []
     ros.node.create_subscription(
@@ -225,7 +226,7 @@ def test_peer_pose_published_by_rclpy_is_discovered(ros, node):
     s.pubs['own_pose'].active = False     # hold own pose back until everything is known
     s.machine(0, (0.5, -0.5), True)
     s.storage(0, (-0.5, 0.8))
-    s.peer('robot_9', (0.9, 0.9), True)
+    peer = s.peer('robot_9', (0.9, 0.9), True)
     p = node()
     for t in ('/robot_9/pose', '/robot_9/has_part', '/machine_0/pose', '/machine_0/part_ready',
               '/storage_0/pose'):
@@ -245,6 +246,16 @@ def test_peer_pose_published_by_rclpy_is_discovered(ros, node):
     m = ros.spin_until(controlling, 5.0, "robot_node's 'controlling' log on /rosout")
     assert 'peers: 1' in m.msg and 'machines: 1' in m.msg and 'storages: 1' in m.msg, m.msg
     assert m.name.endswith('robot_node'), m.name
+
+    # the greedy claim rule: a part-less peer nearer to the only ready machine takes it
+    peer['xy'] = [0.5, -0.1]          # 0.4 m from the machine (robot_0: 1.0 m)
+    peer['has_part'] = False
+    wait_cmd(ros, cmd, STAY, timeout=5.0, what='robot_0 yielding the machine to robot_9')
+    peer['has_part'] = True           # a peer carrying a part claims nothing
+    wait_cmd(ros, cmd, RIGHT, timeout=5.0)
+    peer['has_part'] = False
+    peer['xy'] = [0.5, 0.9]           # part-less again but farther than robot_0 (1.4 m)
+    wait_cmd(ros, cmd, RIGHT, timeout=2.0)
     # the Rust node ignores its own cmd_vel and never takes a peer's cmd_vel
     assert 'discovered /robot_0/cmd_vel' not in p.text()
 
@@ -303,15 +314,28 @@ def _by_node(ros, fn):
 
 
 def test_rclpy_sees_every_rust_publication_with_its_type(live):
+    """Every topic robot_node writes, found from rclpy's graph (all writers in this domain
+    that are not rclpy's), has the contract type, and includes /robot_0/cmd_vel.
+
+    cmd_vel goes through a plain RustDDS writer (msgs::dds::StampedWriter, for source
+    timestamps) that is not registered in ros_discovery_info: rclpy sees the topic and its
+    writer but cannot attribute it to the node (`ros2 node info` omits it; documented
+    trade-off in msgs/src/dds.rs). The node-attributed list is checked to be a subset."""
     ros, _ = live
-    pubs = _by_node(ros, ros.node.get_publisher_names_and_types_by_node)
-    assert '/robot_0/cmd_vel' in pubs, pubs
-    for topic, types in pubs.items():
+    mine = ros.node.get_name()
+    rust = {}
+    for topic, types in ros.node.get_topic_names_and_types():
+        for ep in ros.node.get_publishers_info_by_topic(topic):
+            if ep.node_name != mine:
+                rust.setdefault(topic, set()).add(ep.topic_type)
+                assert ep.topic_type in types
+    assert '/robot_0/cmd_vel' in rust, rust
+    for topic, types in rust.items():
         assert topic in RUST_PUBLISHES, f'unexpected publication {topic} {types}'
-        assert types == [RUST_PUBLISHES[topic]], f'{topic}: {types}'
-    graph = dict(ros.node.get_topic_names_and_types())
-    for topic, types in pubs.items():
-        assert graph.get(topic) == types, f'{topic}: node view {types}, graph {graph.get(topic)}'
+        assert types == {RUST_PUBLISHES[topic]}, f'{topic}: {types}'
+    by_node = _by_node(ros, ros.node.get_publisher_names_and_types_by_node)
+    for topic, types in by_node.items():
+        assert topic in rust and set(types) == rust[topic], f'{topic}: {types}'
 
 
 def test_rclpy_sees_every_rust_subscription_with_its_type(live):
