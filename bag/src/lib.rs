@@ -1,0 +1,31 @@
+//! rosbag2 MCAP bags for `tending` (DESIGN.md "Files", REFERENCE.md "rosbag2 MCAP that other
+//! tools read", docs/adr/0002-rosbag-mcap.md).
+//!
+//! * [`BagWriter`]: a bag directory `<dir>/` holding `<dir-name>_0.mcap` (profile `ros2`, one
+//!   `ros2msg` schema per type, one `cdr` channel per topic with `offered_qos_profiles` in
+//!   its metadata, messages = CDR with the encapsulation header, uncompressed chunks bounded
+//!   in bytes and in time, message and chunk indexes, Statistics) and `metadata.yaml`
+//!   (rosbag2 version 9, storage `mcap`), rewritten after every chunk so a killed recorder
+//!   leaves a directory that describes what reached the disk.
+//! * [`BagReader`]: the messages of a bag file or directory, in file order; lenient on
+//!   files cut short (a recorder killed with SIGKILL).
+//! * [`recover`]: rewrite a cut bag into a complete one holding every message up to the
+//!   last complete chunk.
+
+mod metadata;
+mod reader;
+mod writer;
+
+pub use metadata::{BagMetadata, TopicInfo};
+pub use reader::{recover, BagMessage, BagReader, RecoverReport, TopicSummary};
+pub use writer::{BagWriter, WriterOptions};
+
+/// The storage file of a bag directory: `<dir-name>_0.mcap`, as rosbag2 names it.
+pub fn mcap_file_name(dir: &std::path::Path) -> String {
+    let stem = dir
+        .file_name()
+        .and_then(|s| s.to_str())
+        .filter(|s| !s.is_empty())
+        .unwrap_or("bag");
+    format!("{stem}_0.mcap")
+}
