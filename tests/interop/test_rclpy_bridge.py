@@ -320,3 +320,50 @@ def _stopped(ros, inbox, quiet_s):
     n = len(inbox.msgs)
     ros.spin_for(quiet_s)
     return len(inbox.msgs) == n
+
+
+def test_robot_node_tends_in_the_bridge_watched_by_rclpy(tmp_path):
+    """The production loop, Rust <-> Rust over DDS, observed by rclpy: sim_bridge plus one
+    greedy robot_node for /robot_0 (default parameters, use_sim_time): robot_0 picks a part
+    (has_part goes true) and delivers it (parts_delivered on /tending/metrics), while
+    robot_1, without a node, stands still."""
+    from conftest import ROBOT_NODE
+    require_binary(SIM_BRIDGE)
+    require_binary(ROBOT_NODE)
+    d = next_domain_id()
+    ros = Ros(d, 'fleet_test')
+    poses = {i: Inbox(ros, PoseStamped, f'/robot_{i}/pose', ROBOT_STREAM) for i in (0, 1)}
+    part = Inbox(ros, Bool, '/robot_0/has_part', ROBOT_STREAM)
+    cmds = Inbox(ros, Twist, '/robot_0/cmd_vel', ROBOT_STREAM)
+    metrics = Inbox(ros, DiagnosticArray, '/tending/metrics', VISUALIZATION)
+    env = child_env(d)
+    procs = [Proc([SIM_BRIDGE, '--ros-args', '-p', 'setup:=6.4_2', '-p', 'seed:=3',
+                   '-p', 'startup_grace_s:=300', '-p', 'metrics_period_s:=0.5'],
+                  tmp_path / 'sim_bridge.log', env),
+             Proc([ROBOT_NODE, '--ros-args', '-r', '__ns:=/robot_0', '-p', 'use_sim_time:=true'],
+                  tmp_path / 'robot_node.log', env)]
+
+    def delivered():
+        for arr in reversed(metrics.msgs):
+            for st in arr.status:
+                kv = {v.key: v.value for v in st.values}
+                if 'parts_delivered' in kv:
+                    return int(kv['parts_delivered'])
+        return 0
+    try:
+        ros.spin_until(lambda: poses[0].msgs and poses[1].msgs, DISCOVERY_TIMEOUT_S,
+                       'robot poses from the bridge')
+        start1 = _xy(poses[1].msgs[0])
+        ros.spin_until(lambda: any(m.data for m in part.msgs), 30.0,
+                       'robot_0 picking a part (has_part true)')
+        ros.spin_until(lambda: delivered() >= 1, 30.0,
+                       'robot_0 delivering its part (parts_delivered >= 1)')
+        path = sum(math.dist(_xy(a), _xy(b)) for a, b in zip(poses[0].msgs, poses[0].msgs[1:]))
+        assert path > 0.1, f'robot_0 travelled {path:.3f} m'
+        assert all(_inside(*_xy(m)) for m in poses[0].msgs)
+        assert math.dist(start1, _xy(poses[1].msgs[-1])) < 0.15, 'robot_1 has no node'
+        assert any(abs(m.linear.x) + abs(m.linear.y) > 0 for m in cmds.msgs)
+    finally:
+        codes = [p.terminate() for p in reversed(procs)]
+        ros.close()
+    assert codes == [0, 0], codes

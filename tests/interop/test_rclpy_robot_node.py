@@ -260,6 +260,40 @@ def test_peer_pose_published_by_rclpy_is_discovered(ros, node):
     assert 'discovered /robot_0/cmd_vel' not in p.text()
 
 
+def test_clock_from_rclpy_drives_sim_time_ticks(ros, node):
+    """/clock (rosgraph_msgs/Clock, reliable keep-last 1) from rclpy -> Rust: with
+    use_sim_time robot_node acts once per 1/control_rate_hz of sim time, so cmd_vel follows
+    the published clock (here 4x faster than wall time) and stops when it stops."""
+    from rosgraph_msgs.msg import Clock
+    from conftest import CLOCK
+    cmd = CmdLog(ros, '/robot_0/cmd_vel')
+    s = Scene(ros)
+    s.machine(0, (0.5, -0.5), True)
+    s.storage(0, (-0.5, 0.8))
+    sim = {'t': 1.0, 'run': True}
+
+    def clock():
+        if sim['run']:
+            sim['t'] += 0.1          # one control period of sim time per sample
+        m = Clock()
+        m.clock.sec = int(sim['t'])
+        m.clock.nanosec = int(round((sim['t'] - int(sim['t'])) * 1e9))
+        return m
+    clk = Periodic(ros, Clock, '/clock', CLOCK, clock, hz=40)
+    node('-p', 'use_sim_time:=true', '-p', 'control_rate_hz:=10')
+    wait_cmd(ros, cmd, RIGHT)
+    n0, c0 = len(cmd.msgs), clk.sent
+    ros.spin_for(2.0)
+    ticks, steps = len(cmd.msgs) - n0, clk.sent - c0
+    # 10 Hz of sim time at 4x: ~40 commands per wall second, far above the wall-clock 10 Hz
+    assert 0.6 * steps <= ticks <= steps + 2, f'{ticks} commands for {steps} clock steps'
+    sim['run'] = False               # the clock stands still (still published): no ticks
+    ros.spin_for(0.5)
+    n1 = len(cmd.msgs)
+    ros.spin_for(1.0)
+    assert len(cmd.msgs) - n1 <= 1, f'{len(cmd.msgs) - n1} commands while sim time stood still'
+
+
 # ------------------------------------------------------- graph: names, types, QoS (rclpy view)
 
 @pytest.fixture(scope='module')
