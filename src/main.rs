@@ -1,6 +1,7 @@
 //! `tending`: the command line of the project (simulate, benchmark; train, eval and the
 //! fleet join as their crates land).
 
+mod bag_cmd;
 mod bench_sim;
 mod render;
 mod sim_cmd;
@@ -26,6 +27,10 @@ enum Cmd {
     Sim(sim_cmd::SimArgs),
     /// Measure simulator throughput (agent-steps/s) and write a Markdown report.
     BenchSim(bench_sim::BenchArgs),
+    /// rosbag2 MCAP bags: info, metrics, recover, render, play.
+    Bag(bag_cmd::BagArgs),
+    /// Record every contract topic of a running fleet into a bag until Ctrl-C / SIGTERM.
+    Record(bag_cmd::RecordArgs),
     /// Print the default scenario config (TOML) to start a custom one from.
     Config,
 }
@@ -35,6 +40,8 @@ fn main() -> Result<()> {
     match cli.cmd {
         Cmd::Sim(a) => sim_cmd::run(a),
         Cmd::BenchSim(a) => bench_sim::run(a),
+        Cmd::Bag(a) => bag_cmd::run(a),
+        Cmd::Record(a) => bag_cmd::record(a),
         Cmd::Config => {
             print!("{}", sim::ScenarioConfig::default().to_toml());
             Ok(())
