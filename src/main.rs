@@ -3,9 +3,12 @@
 
 mod bag_cmd;
 mod bench_sim;
+mod eval_cmd;
+mod plot;
 mod render;
 mod sim_cmd;
 mod stats;
+mod train_cmd;
 
 use anyhow::Result;
 use clap::{Parser, Subcommand};
@@ -27,6 +30,10 @@ enum Cmd {
     Sim(sim_cmd::SimArgs),
     /// Measure simulator throughput (agent-steps/s) and write a Markdown report.
     BenchSim(bench_sim::BenchArgs),
+    /// Train SMAPPO or MAPPO with PPO (progress, log.csv, curve.png, checkpoints, resume).
+    Train(train_cmd::TrainArgs),
+    /// Evaluate a checkpoint or a scripted baseline over setups and seeds (paper tables).
+    Eval(eval_cmd::EvalArgs),
     /// rosbag2 MCAP bags: info, metrics, recover, render, play.
     Bag(bag_cmd::BagArgs),
     /// Record every contract topic of a running fleet into a bag until Ctrl-C / SIGTERM.
@@ -40,6 +47,8 @@ fn main() -> Result<()> {
     match cli.cmd {
         Cmd::Sim(a) => sim_cmd::run(a),
         Cmd::BenchSim(a) => bench_sim::run(a),
+        Cmd::Train(a) => train_cmd::run(a),
+        Cmd::Eval(a) => eval_cmd::run(a),
         Cmd::Bag(a) => bag_cmd::run(a),
         Cmd::Record(a) => bag_cmd::record(a),
         Cmd::Config => {

@@ -379,6 +379,16 @@ pub fn save_trainer_state(
     write(path, t, md)
 }
 
+/// The free-form `extra` object of a trainer state, read without touching any network
+/// (the trainer needs it to build networks of the right shape before loading them).
+pub fn read_trainer_extra(path: &Path) -> Result<serde_json::Value, CheckpointError> {
+    let bytes = read(path)?;
+    let v = parse_meta(&bytes, TRAINER_FORMAT)?;
+    let meta: TrainerMeta =
+        serde_json::from_value(v).map_err(|e| CheckpointError::Metadata(e.to_string()))?;
+    Ok(meta.extra)
+}
+
 /// Restore a state saved by [`save_trainer_state`] into networks of the same
 /// architectures (refused otherwise). Returns the `extra` object.
 pub fn load_trainer_state(

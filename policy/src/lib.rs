@@ -17,6 +17,8 @@ pub mod head;
 pub mod inference;
 pub mod mlp_base;
 pub mod nn;
+#[cfg(feature = "train")]
+pub mod train;
 
 pub use actor::{Actor, ActorLossStats, PpoActorConfig};
 pub use checkpoint::{CheckpointError, CheckpointMeta};

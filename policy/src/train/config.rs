@@ -1,0 +1,116 @@
+//! Training hyper-parameters (TOML, every field optional, unknown fields refused).
+
+use serde::{Deserialize, Serialize};
+
+/// All PPO hyper-parameters. Defaults are MAPPO's (marlbenchmark/on-policy `config.py`)
+/// except where a field says otherwise and why.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct TrainConfig {
+    /// Parallel environments per update (MAPPO `n_rollout_threads`, default there 32).
+    /// Here 8: every update collects exactly one 200-step episode per env, so n_envs is
+    /// the number of episodes per update; with 32, a 2,000-episode run (the paper's
+    /// budget) would make only 62 updates. 8 gives 250 updates of 9,600 agent-steps on
+    /// 6.4_2, which learns (see docs/bench/train.md) and fits the wall-time budget.
+    pub n_envs: usize,
+    /// PPO epochs over each batch (MAPPO default 15, 10 for some MPE tasks). Here 10:
+    /// measured on the 2-core machine, one 6.4_2 update (8 envs x 200 steps x 6 robots)
+    /// costs ~0.6 s rollout + ~0.45 s per epoch (actor and critic on the two cores), so 10
+    /// epochs make 2,000 episodes in about 25-35 minutes (15 would take ~45-50).
+    pub ppo_epoch: usize,
+    /// Mini-batches per epoch (MAPPO default 1).
+    pub num_mini_batch: usize,
+    /// BPTT chunk length (MAPPO `data_chunk_length` 10); must divide the episode length.
+    pub data_chunk_length: usize,
+    pub gamma: f32,
+    pub gae_lambda: f32,
+    /// PPO ratio clip (MAPPO `clip_param`).
+    pub clip_param: f32,
+    pub entropy_coef: f32,
+    pub value_loss_coef: f32,
+    /// Huber delta of the value loss.
+    pub huber_delta: f32,
+    pub max_grad_norm: f32,
+    /// Adam learning rate, actor and critic (MAPPO `lr`, `critic_lr`).
+    pub lr: f32,
+    pub critic_lr: f32,
+    /// Adam epsilon (MAPPO `opti_eps`).
+    pub opti_eps: f32,
+    /// MAPPO ValueNorm running-statistics decay.
+    pub valuenorm_beta: f64,
+    pub use_valuenorm: bool,
+    /// Normalise advantages over the batch (MAPPO does).
+    pub advantage_norm: bool,
+    /// Multiply every reward by this before learning (1 = the simulator's rewards).
+    pub reward_scale: f32,
+    /// MAPPO only: observation padding (actor and critic). Defaults cover the paper's
+    /// largest zero-shot setup 42.28_14, so a MAPPO trained on 6.4_2 can be evaluated on
+    /// every Table III setup.
+    pub mappo_max_robots: usize,
+    pub mappo_max_machines: usize,
+    pub mappo_max_storages: usize,
+    /// Save checkpoints every this many updates (and at the end / on Ctrl-C).
+    pub save_every: usize,
+}
+
+impl Default for TrainConfig {
+    fn default() -> Self {
+        Self {
+            n_envs: 4,
+            ppo_epoch: 10,
+            num_mini_batch: 1,
+            data_chunk_length: 10,
+            gamma: 0.99,
+            gae_lambda: 0.95,
+            clip_param: 0.2,
+            entropy_coef: 0.01,
+            value_loss_coef: 1.0,
+            huber_delta: 10.0,
+            max_grad_norm: 10.0,
+            lr: 5e-4,
+            critic_lr: 5e-4,
+            opti_eps: 1e-5,
+            valuenorm_beta: 0.99999,
+            use_valuenorm: true,
+            advantage_norm: true,
+            reward_scale: 1.0,
+            mappo_max_robots: 42,
+            mappo_max_machines: 28,
+            mappo_max_storages: 14,
+            save_every: 5,
+        }
+    }
+}
+
+impl TrainConfig {
+    pub fn from_toml(text: &str) -> Result<Self, String> {
+        let c: Self = toml::from_str(text).map_err(|e| e.to_string())?;
+        c.validate()?;
+        Ok(c)
+    }
+
+    pub fn validate(&self) -> Result<(), String> {
+        let pos = [
+            ("n_envs", self.n_envs),
+            ("ppo_epoch", self.ppo_epoch),
+            ("num_mini_batch", self.num_mini_batch),
+            ("data_chunk_length", self.data_chunk_length),
+            ("save_every", self.save_every),
+        ];
+        for (name, v) in pos {
+            if v == 0 {
+                return Err(format!("{name} must be >= 1"));
+            }
+        }
+        if !(0.0..=1.0).contains(&self.gamma) || !(0.0..=1.0).contains(&self.gae_lambda) {
+            return Err("gamma and gae_lambda must lie in [0, 1]".into());
+        }
+        if !(self.valuenorm_beta > 0.0 && self.valuenorm_beta < 1.0) {
+            return Err("valuenorm_beta must lie in (0, 1)".into());
+        }
+        if !(self.lr > 0.0 && self.critic_lr > 0.0) {
+            return Err("learning rates must be > 0".into());
+        }
+        Ok(())
+    }
+}

@@ -1,0 +1,694 @@
+//! The PPO trainer (MAPPO recipe) for SMAPPO and MAPPO actor/critic pairs.
+//!
+//! One update = one rollout of `episode_steps` steps in `n_envs` fresh environments (so
+//! exactly `n_envs` episodes), GAE per robot on per-robot rewards, then `ppo_epoch`
+//! epochs of recurrent PPO over 10-step chunks (hidden state at each chunk start taken
+//! from the rollout), actor and critic gradients computed on the two cores at once.
+//!
+//! Determinism and exact resume: every random stream of update `u` (environment seeds,
+//! action sampling, chunk shuffling) derives from (seed, u) only, and updates start from
+//! freshly reset environments, so the trainer state between updates is just the networks,
+//! Adam moments, the value normaliser and counters; [`Trainer::save_state`] stores all of
+//! them bit-exactly.
+
+use super::config::TrainConfig;
+use super::gae::gae;
+use super::valuenorm::{ValueNorm, ValueNormBits};
+use crate::checkpoint::{load_trainer_state, save_policy, save_trainer_state, CheckpointError};
+use crate::config::{ArchConfig, ModelKind};
+use crate::nn::categorical;
+use crate::{Actor, Critic, PolicyError, PpoActorConfig, ValueLossConfig};
+use obs::{FlatLayout, ObsBatch};
+use rand::seq::SliceRandom;
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+use serde::{Deserialize, Serialize};
+use sim::{Metrics, ScenarioConfig, Setup, VecEnv};
+use std::path::Path;
+use std::time::Instant;
+
+#[derive(Debug, thiserror::Error)]
+pub enum TrainError {
+    #[error(transparent)]
+    Policy(#[from] PolicyError),
+    #[error(transparent)]
+    Sim(#[from] sim::SimError),
+    #[error(transparent)]
+    Checkpoint(#[from] CheckpointError),
+    #[error("training config: {0}")]
+    Config(String),
+}
+
+/// One curriculum stage: train on `setup` for `episodes` episodes.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Stage {
+    pub setup: Setup,
+    pub episodes: u64,
+}
+
+/// Parse `6.4_2:2000,12.8_4:100` (setup:episodes, comma separated).
+pub fn parse_curriculum(s: &str) -> Result<Vec<Stage>, TrainError> {
+    let bad = |m: String| TrainError::Config(format!("curriculum `{s}`: {m}"));
+    let mut out = vec![];
+    for part in s.split(',').map(str::trim).filter(|p| !p.is_empty()) {
+        let (name, eps) = part
+            .split_once(':')
+            .ok_or_else(|| bad(format!("`{part}` is not setup:episodes")))?;
+        let setup: Setup = name.parse()?;
+        let episodes: u64 = eps
+            .trim()
+            .parse()
+            .map_err(|_| bad(format!("`{eps}` is not an episode count")))?;
+        if episodes == 0 {
+            return Err(bad(format!("stage {name} has 0 episodes")));
+        }
+        out.push(Stage { setup, episodes });
+    }
+    if out.is_empty() {
+        return Err(bad("no stage".into()));
+    }
+    Ok(out)
+}
+
+pub fn format_curriculum(stages: &[Stage]) -> String {
+    stages
+        .iter()
+        .map(|s| format!("{}:{}", s.setup, s.episodes))
+        .collect::<Vec<_>>()
+        .join(",")
+}
+
+/// What one update did.
+#[derive(Debug, Clone, Default, PartialEq, Serialize)]
+pub struct UpdateStats {
+    /// 1-based index of this update.
+    pub update: u64,
+    /// Totals after this update.
+    pub episodes: u64,
+    pub agent_steps: u64,
+    pub stage: usize,
+    pub setup: String,
+    /// True when this update was the first of a new curriculum stage.
+    pub stage_start: bool,
+    /// Means over this update's episodes.
+    pub team_reward: f64,
+    pub parts_delivered: f64,
+    pub collisions: f64,
+    pub mu: f64,
+    /// Means over the mini-batch steps of this update.
+    pub policy_loss: f32,
+    pub value_loss: f32,
+    pub entropy: f32,
+    pub approx_kl: f32,
+    pub clip_frac: f32,
+    pub actor_grad_norm: f32,
+    pub critic_grad_norm: f32,
+    pub rollout_secs: f64,
+    pub train_secs: f64,
+}
+
+/// Rollout storage, step-major: entry `t * B + e * n + i`.
+#[derive(Debug, Default)]
+struct Rollout {
+    obs: ObsBatch,
+    masks: Vec<f32>,
+    dones: Vec<bool>,
+    actions: Vec<u8>,
+    logp: Vec<f32>,
+    /// critic outputs (normalised when ValueNorm is on)
+    values: Vec<f32>,
+    rewards: Vec<f32>,
+    /// hidden states at chunk starts: (chunk, B, H)
+    ha: Vec<f32>,
+    hc: Vec<f32>,
+    adv: Vec<f32>,
+    ret: Vec<f32>,
+}
+
+/// A mini-batch of chunks, rows `t * B' + k * n + i`.
+#[derive(Debug, Default)]
+struct MiniBatch {
+    obs: ObsBatch,
+    masks: Vec<f32>,
+    ha: Vec<f32>,
+    hc: Vec<f32>,
+    actions: Vec<u8>,
+    logp: Vec<f32>,
+    adv: Vec<f32>,
+    values: Vec<f32>,
+    ret: Vec<f32>,
+}
+
+#[derive(Debug, Clone, Serialize, Deserialize)]
+struct StateExtra {
+    kind: ModelKind,
+    config: TrainConfig,
+    scenario_toml: String,
+    schedule: String,
+    seed: u64,
+    update: u64,
+    episodes: u64,
+    agent_steps: u64,
+    stage: usize,
+    stage_episodes: u64,
+    valuenorm: ValueNormBits,
+}
+
+pub struct Trainer {
+    pub kind: ModelKind,
+    pub cfg: TrainConfig,
+    pub scenario: ScenarioConfig,
+    pub schedule: Vec<Stage>,
+    pub seed: u64,
+    pub actor: Actor,
+    pub critic: Critic,
+    pub vnorm: ValueNorm,
+    /// Updates done so far.
+    pub update: u64,
+    pub episodes: u64,
+    pub agent_steps: u64,
+    pub stage: usize,
+    pub stage_episodes: u64,
+    buf: Rollout,
+    mb: MiniBatch,
+}
+
+/// splitmix64 of (seed, update, stream): independent seeds per update and purpose.
+fn mix(seed: u64, update: u64, stream: u64) -> u64 {
+    let mut z = seed
+        .wrapping_add(update.wrapping_mul(0x9E37_79B9_7F4A_7C15))
+        .wrapping_add(stream.wrapping_mul(0xD1B5_4A32_D192_ED03));
+    z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+    z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+    z ^ (z >> 31)
+}
+
+/// Copy rows `rows` of `src` (in order) into `dst`.
+pub(crate) fn gather_rows(src: &ObsBatch, rows: &[usize], dst: &mut ObsBatch) {
+    let c = src.counts;
+    dst.resize(rows.len(), c);
+    let ws = [
+        obs::SELF_DIM,
+        c.machines * obs::MACHINE_DIM,
+        c.storages * obs::STORAGE_DIM,
+        c.peers * obs::PEER_DIM,
+    ];
+    let srcs = [&src.own, &src.machines, &src.storages, &src.peers];
+    let dsts = [
+        &mut dst.own,
+        &mut dst.machines,
+        &mut dst.storages,
+        &mut dst.peers,
+    ];
+    for ((w, s), d) in ws.into_iter().zip(srcs).zip(dsts) {
+        if w == 0 {
+            continue;
+        }
+        for (k, &r) in rows.iter().enumerate() {
+            d[k * w..(k + 1) * w].copy_from_slice(&s[r * w..(r + 1) * w]);
+        }
+    }
+}
+
+impl Trainer {
+    /// Fresh networks for `kind`, seeded by `seed`.
+    pub fn new(
+        kind: ModelKind,
+        cfg: TrainConfig,
+        scenario: ScenarioConfig,
+        schedule: Vec<Stage>,
+        seed: u64,
+    ) -> Result<Self, TrainError> {
+        cfg.validate().map_err(TrainError::Config)?;
+        if schedule.is_empty() {
+            return Err(TrainError::Config("empty schedule".into()));
+        }
+        let steps = scenario.world.episode_steps as usize;
+        if !steps.is_multiple_of(cfg.data_chunk_length) {
+            return Err(TrainError::Config(format!(
+                "data_chunk_length {} must divide the episode length {steps}",
+                cfg.data_chunk_length
+            )));
+        }
+        let (actor_arch, critic_arch) = Self::archs(kind, &cfg, &schedule)?;
+        let mut actor = Actor::new(actor_arch, mix(seed, u64::MAX, 10));
+        let mut critic = Critic::new(critic_arch, mix(seed, u64::MAX, 11));
+        actor.opt.cfg.lr = cfg.lr;
+        actor.opt.cfg.eps = cfg.opti_eps;
+        critic.opt.cfg.lr = cfg.critic_lr;
+        critic.opt.cfg.eps = cfg.opti_eps;
+        Ok(Self {
+            kind,
+            vnorm: ValueNorm::new(cfg.valuenorm_beta),
+            cfg,
+            scenario,
+            schedule,
+            seed,
+            actor,
+            critic,
+            update: 0,
+            episodes: 0,
+            agent_steps: 0,
+            stage: 0,
+            stage_episodes: 0,
+            buf: Rollout::default(),
+            mb: MiniBatch::default(),
+        })
+    }
+
+    fn archs(
+        kind: ModelKind,
+        cfg: &TrainConfig,
+        schedule: &[Stage],
+    ) -> Result<(ArchConfig, ArchConfig), TrainError> {
+        Ok(match kind {
+            ModelKind::Smappo => (ArchConfig::smappo(), ArchConfig::smappo()),
+            ModelKind::Mappo => {
+                let flat = FlatLayout {
+                    max_machines: cfg.mappo_max_machines,
+                    max_storages: cfg.mappo_max_storages,
+                    max_peers: cfg.mappo_max_robots.saturating_sub(1),
+                };
+                let max_robots = schedule.iter().map(|s| s.setup.robots).max().unwrap_or(1);
+                for s in schedule {
+                    if s.setup.robots > cfg.mappo_max_robots
+                        || s.setup.machines > cfg.mappo_max_machines
+                        || s.setup.storages > cfg.mappo_max_storages
+                    {
+                        return Err(TrainError::Config(format!(
+                            "setup {} exceeds the MAPPO padding ({} robots, {} machines, {} \
+                             storages): raise mappo_max_*",
+                            s.setup,
+                            cfg.mappo_max_robots,
+                            cfg.mappo_max_machines,
+                            cfg.mappo_max_storages
+                        )));
+                    }
+                }
+                // The actor is padded to the configured maxima (zero-shot evaluation);
+                // the critic only needs the robots it is trained with.
+                (
+                    ArchConfig::mappo(flat, cfg.mappo_max_robots),
+                    ArchConfig::mappo(flat, max_robots),
+                )
+            }
+        })
+    }
+
+    pub fn total_episodes(&self) -> u64 {
+        self.schedule.iter().map(|s| s.episodes).sum()
+    }
+
+    pub fn finished(&self) -> bool {
+        self.stage >= self.schedule.len()
+    }
+
+    /// Setup of the stage being trained (the last one when finished).
+    pub fn current_setup(&self) -> Setup {
+        self.schedule[self.stage.min(self.schedule.len() - 1)].setup
+    }
+
+    /// Collect one rollout and run the PPO epochs.
+    pub fn step(&mut self) -> Result<UpdateStats, TrainError> {
+        if self.finished() {
+            return Err(TrainError::Config("the schedule is finished".into()));
+        }
+        let setup = self.current_setup();
+        let stage_start = self.stage_episodes == 0;
+        let t0 = Instant::now();
+        let metrics = self.rollout(setup)?;
+        let rollout_secs = t0.elapsed().as_secs_f64();
+        let t1 = Instant::now();
+        let mut st = self.ppo(setup.robots)?;
+        st.train_secs = t1.elapsed().as_secs_f64();
+        st.rollout_secs = rollout_secs;
+
+        let e = self.cfg.n_envs as u64;
+        self.update += 1;
+        self.episodes += e;
+        self.agent_steps += e * self.scenario.world.episode_steps as u64 * setup.robots as u64;
+        self.stage_episodes += e;
+        st.stage = self.stage;
+        if self.stage_episodes >= self.schedule[self.stage].episodes {
+            self.stage += 1;
+            self.stage_episodes = 0;
+        }
+        st.update = self.update;
+        st.episodes = self.episodes;
+        st.agent_steps = self.agent_steps;
+        st.setup = setup.to_string();
+        st.stage_start = stage_start;
+        let k = metrics.len().max(1) as f64;
+        st.team_reward = metrics.iter().map(|m| m.total_reward).sum::<f64>() / k;
+        st.parts_delivered = metrics
+            .iter()
+            .map(|m| m.parts_delivered as f64)
+            .sum::<f64>()
+            / k;
+        st.collisions = metrics.iter().map(|m| m.collisions as f64).sum::<f64>() / k;
+        st.mu = metrics.iter().map(|m| m.utilization()).sum::<f64>() / k;
+        Ok(st)
+    }
+
+    fn denorm(&self, v: f32) -> f32 {
+        if self.cfg.use_valuenorm {
+            self.vnorm.denormalize(v)
+        } else {
+            v
+        }
+    }
+
+    fn rollout(&mut self, setup: Setup) -> Result<Vec<Metrics>, TrainError> {
+        let cfg = &self.cfg;
+        let (e, n) = (cfg.n_envs, setup.robots);
+        let b = e * n;
+        let t_len = self.scenario.world.episode_steps as usize;
+        let l = cfg.data_chunk_length;
+        let h = self.actor.hidden();
+        let hc_dim = self.critic.arch.hidden;
+        let mut venv = VecEnv::new(
+            self.scenario.clone(),
+            setup,
+            e,
+            mix(self.seed, self.update, 1),
+        )?;
+        let mut rng = ChaCha8Rng::seed_from_u64(mix(self.seed, self.update, 2));
+        let buf = &mut self.buf;
+        buf.obs = ObsBatch::default();
+        buf.obs.rows = 0;
+        for v in [
+            &mut buf.masks,
+            &mut buf.logp,
+            &mut buf.values,
+            &mut buf.rewards,
+            &mut buf.ha,
+            &mut buf.hc,
+        ] {
+            v.clear();
+        }
+        buf.dones.clear();
+        buf.actions.clear();
+        let mut ha = vec![0.0f32; b * h];
+        let mut hc = vec![0.0f32; b * hc_dim];
+        let mut masks = vec![0.0f32; b];
+        let mut step_obs = ObsBatch::default();
+        let mut lp = vec![0.0f32; self.actor.arch.n_actions];
+        let mut acts = vec![0u8; b];
+        let mut finished = vec![];
+        for t in 0..t_len {
+            venv.observe(&mut step_obs);
+            if t % l == 0 {
+                buf.ha.extend_from_slice(&ha);
+                buf.hc.extend_from_slice(&hc);
+            }
+            buf.obs
+                .extend_from(&step_obs)
+                .map_err(|e| TrainError::Policy(PolicyError::Obs(e)))?;
+            buf.masks.extend_from_slice(&masks);
+            let (actor, critic) = (&mut self.actor, &mut self.critic);
+            let (ra, rc) = rayon::join(
+                || {
+                    actor
+                        .forward_step(&step_obs, &mut ha, &masks)
+                        .map(|x| x.to_vec())
+                },
+                || {
+                    critic
+                        .forward_step(&step_obs, n, &mut hc, &masks)
+                        .map(|x| x.to_vec())
+                },
+            );
+            let (logits, values) = (ra?, rc?);
+            let k = lp.len();
+            for r in 0..b {
+                let lg = &logits[r * k..(r + 1) * k];
+                categorical::log_softmax(lg, &mut lp);
+                let a = categorical::sample(lg, rng.gen::<f32>());
+                acts[r] = a as u8;
+                buf.logp.push(lp[a]);
+            }
+            buf.actions.extend_from_slice(&acts);
+            buf.values.extend_from_slice(&values);
+            venv.step_actions(&acts)?;
+            buf.rewards
+                .extend(venv.rewards().iter().map(|r| r * cfg.reward_scale));
+            for (ei, &d) in venv.done().iter().enumerate() {
+                for i in 0..n {
+                    buf.dones.push(d);
+                    masks[ei * n + i] = if d { 0.0 } else { 1.0 };
+                }
+            }
+            finished.extend(venv.finished().iter().flatten().copied());
+        }
+        // bootstrap values of the state after the last step (masked by done in GAE)
+        venv.observe(&mut step_obs);
+        let last_raw = self
+            .critic
+            .forward_step(&step_obs, n, &mut hc, &masks)?
+            .to_vec();
+        let last: Vec<f32> = last_raw.iter().map(|&v| self.denorm(v)).collect();
+        let values: Vec<f32> = self.buf.values.iter().map(|&v| self.denorm(v)).collect();
+        let buf = &mut self.buf;
+        buf.adv.resize(t_len * b, 0.0);
+        buf.ret.resize(t_len * b, 0.0);
+        gae(
+            &buf.rewards,
+            &values,
+            &buf.dones,
+            &last,
+            t_len,
+            b,
+            cfg.gamma,
+            cfg.gae_lambda,
+            &mut buf.adv,
+            &mut buf.ret,
+        );
+        if cfg.advantage_norm {
+            let m = buf.adv.iter().map(|&x| x as f64).sum::<f64>() / buf.adv.len() as f64;
+            let var = buf
+                .adv
+                .iter()
+                .map(|&x| (x as f64 - m) * (x as f64 - m))
+                .sum::<f64>()
+                / buf.adv.len() as f64;
+            let s = var.sqrt() + 1e-5;
+            for a in &mut buf.adv {
+                *a = ((*a as f64 - m) / s) as f32;
+            }
+        }
+        Ok(finished)
+    }
+
+    fn ppo(&mut self, n: usize) -> Result<UpdateStats, TrainError> {
+        let cfg = self.cfg.clone();
+        let e = cfg.n_envs;
+        let b = e * n;
+        let l = cfg.data_chunk_length;
+        let t_len = self.scenario.world.episode_steps as usize;
+        let n_chunks = t_len / l;
+        let units = e * n_chunks;
+        let per_mb = units.div_ceil(cfg.num_mini_batch);
+        let (ha_dim, hc_dim) = (self.actor.hidden(), self.critic.arch.hidden);
+        let mut rng = ChaCha8Rng::seed_from_u64(mix(self.seed, self.update, 3));
+        let mut perm: Vec<usize> = (0..units).collect();
+        let pcfg = PpoActorConfig {
+            clip: cfg.clip_param,
+            ent_coef: cfg.entropy_coef,
+        };
+        let vcfg = ValueLossConfig {
+            clip: cfg.clip_param,
+            huber_delta: cfg.huber_delta,
+            coef: cfg.value_loss_coef,
+        };
+        let mut st = UpdateStats::default();
+        let mut count = 0f32;
+        let mut rows = vec![];
+        for _ in 0..cfg.ppo_epoch {
+            perm.shuffle(&mut rng);
+            for mb_units in perm.chunks(per_mb) {
+                let bu = mb_units.len() * n;
+                // rows t * bu + k * n + i  <-  source (c * l + t) * b + env * n + i
+                rows.clear();
+                for t in 0..l {
+                    for &u in mb_units {
+                        let (env, c) = (u / n_chunks, u % n_chunks);
+                        for i in 0..n {
+                            rows.push((c * l + t) * b + env * n + i);
+                        }
+                    }
+                }
+                let buf = &self.buf;
+                let mb = &mut self.mb;
+                gather_rows(&buf.obs, &rows, &mut mb.obs);
+                mb.masks.clear();
+                mb.masks.extend(rows.iter().map(|&r| buf.masks[r]));
+                mb.actions.clear();
+                mb.actions.extend(rows.iter().map(|&r| buf.actions[r]));
+                mb.logp.clear();
+                mb.logp.extend(rows.iter().map(|&r| buf.logp[r]));
+                mb.adv.clear();
+                mb.adv.extend(rows.iter().map(|&r| buf.adv[r]));
+                mb.values.clear();
+                mb.values.extend(rows.iter().map(|&r| buf.values[r]));
+                mb.ret.clear();
+                mb.ret.extend(rows.iter().map(|&r| buf.ret[r]));
+                mb.ha.clear();
+                mb.hc.clear();
+                for &u in mb_units {
+                    let (env, c) = (u / n_chunks, u % n_chunks);
+                    let r0 = c * b + env * n;
+                    mb.ha
+                        .extend_from_slice(&buf.ha[r0 * ha_dim..(r0 + n) * ha_dim]);
+                    mb.hc
+                        .extend_from_slice(&buf.hc[r0 * hc_dim..(r0 + n) * hc_dim]);
+                }
+                if cfg.use_valuenorm {
+                    self.vnorm.update(&mb.ret);
+                    let vn = &self.vnorm;
+                    mb.ret.iter_mut().for_each(|r| *r = vn.normalize(*r));
+                }
+                let (actor, critic, mb) = (&mut self.actor, &mut self.critic, &self.mb);
+                let (ra, rc) = rayon::join(
+                    || {
+                        actor.ppo_grads(
+                            &mb.obs,
+                            l,
+                            bu,
+                            &mb.ha,
+                            &mb.masks,
+                            &mb.actions,
+                            &mb.logp,
+                            &mb.adv,
+                            pcfg,
+                        )
+                    },
+                    || {
+                        critic.value_grads(
+                            &mb.obs, l, bu, n, &mb.hc, &mb.masks, &mb.values, &mb.ret, vcfg,
+                        )
+                    },
+                );
+                let (sa, sc) = (ra?, rc?);
+                st.actor_grad_norm += actor.step(cfg.max_grad_norm);
+                st.critic_grad_norm += critic.step(cfg.max_grad_norm);
+                st.policy_loss += sa.policy_loss;
+                st.entropy += sa.entropy;
+                st.approx_kl += sa.approx_kl;
+                st.clip_frac += sa.clip_frac;
+                st.value_loss += sc.value_loss;
+                count += 1.0;
+            }
+        }
+        for v in [
+            &mut st.actor_grad_norm,
+            &mut st.critic_grad_norm,
+            &mut st.policy_loss,
+            &mut st.entropy,
+            &mut st.approx_kl,
+            &mut st.clip_frac,
+            &mut st.value_loss,
+        ] {
+            *v /= count.max(1.0);
+        }
+        Ok(st)
+    }
+
+    /// Free-form training metadata stored in the policy checkpoint.
+    pub fn training_meta(&self) -> serde_json::Value {
+        serde_json::json!({
+            "model": self.kind,
+            "setup": self.current_setup().to_string(),
+            "schedule": format_curriculum(&self.schedule),
+            "episodes": self.episodes,
+            "updates": self.update,
+            "agent_steps": self.agent_steps,
+            "seed": self.seed,
+            "k_speed": self.scenario.task.k_speed,
+            "scenario": serde_json::to_value(&self.scenario).unwrap_or(serde_json::Value::Null),
+            "train_config": serde_json::to_value(&self.cfg).unwrap_or(serde_json::Value::Null),
+        })
+    }
+
+    pub fn save_policy(&self, path: &Path) -> Result<(), TrainError> {
+        save_policy(path, &self.actor, self.training_meta())?;
+        Ok(())
+    }
+
+    /// Everything needed to continue bit-exactly.
+    pub fn save_state(&self, path: &Path) -> Result<(), TrainError> {
+        let extra = StateExtra {
+            kind: self.kind,
+            config: self.cfg.clone(),
+            scenario_toml: self.scenario.to_toml(),
+            schedule: format_curriculum(&self.schedule),
+            seed: self.seed,
+            update: self.update,
+            episodes: self.episodes,
+            agent_steps: self.agent_steps,
+            stage: self.stage,
+            stage_episodes: self.stage_episodes,
+            valuenorm: self.vnorm.to_bits(),
+        };
+        let v = serde_json::to_value(&extra).map_err(|e| TrainError::Config(e.to_string()))?;
+        save_trainer_state(path, &self.actor, &self.critic, v)?;
+        Ok(())
+    }
+
+    /// Continue from a saved state. `schedule`, when given, replaces the saved schedule
+    /// (e.g. to extend a run); stage and episode counters are kept.
+    pub fn resume(path: &Path, schedule: Option<Vec<Stage>>) -> Result<Self, TrainError> {
+        let meta = crate::checkpoint::read_trainer_extra(path)?;
+        let extra: StateExtra = serde_json::from_value(meta)
+            .map_err(|e| TrainError::Config(format!("trainer state extra: {e}")))?;
+        let scenario = ScenarioConfig::from_toml(&extra.scenario_toml, "trainer state")?;
+        let saved = parse_curriculum(&extra.schedule)?;
+        let mut t = Self::new(
+            extra.kind,
+            extra.config.clone(),
+            scenario,
+            saved.clone(),
+            extra.seed,
+        )?;
+        load_trainer_state(path, &mut t.actor, &mut t.critic)?;
+        t.update = extra.update;
+        t.episodes = extra.episodes;
+        t.agent_steps = extra.agent_steps;
+        t.stage = extra.stage;
+        t.stage_episodes = extra.stage_episodes;
+        t.vnorm = ValueNorm::from_bits(extra.valuenorm);
+        if let Some(s) = schedule {
+            if s != saved {
+                t.set_schedule(s)?;
+            }
+        }
+        Ok(t)
+    }
+
+    /// Replace the schedule (e.g. to extend a resumed run): the stage is re-derived from
+    /// the episodes trained so far; refused when it would change the network shapes.
+    pub fn set_schedule(&mut self, s: Vec<Stage>) -> Result<(), TrainError> {
+        if s.is_empty() {
+            return Err(TrainError::Config("empty schedule".into()));
+        }
+        let (a, c) = Self::archs(self.kind, &self.cfg, &s)?;
+        if a != self.actor.arch || c != self.critic.arch {
+            return Err(TrainError::Config(
+                "the new schedule changes the network shapes (MAPPO critic padding)".into(),
+            ));
+        }
+        self.schedule = s;
+        let mut left = self.episodes;
+        self.stage = 0;
+        self.stage_episodes = 0;
+        for st in &self.schedule {
+            if left >= st.episodes {
+                left -= st.episodes;
+                self.stage += 1;
+            } else {
+                self.stage_episodes = left;
+                break;
+            }
+        }
+        Ok(())
+    }
+}
