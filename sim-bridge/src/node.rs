@@ -147,7 +147,8 @@ fn event_loop(
                          node: &Node,
                          robots_w: &mut BTreeMap<String, EntityWriters>,
                          machines_w: &mut HashMap<u32, EntityWriters>,
-                         storages_w: &mut HashMap<u32, EntityWriters>|
+                         storages_w: &mut HashMap<u32, EntityWriters>,
+                         send: bool|
      -> anyhow::Result<()> {
         let stamp = core.stamp();
         let ns = stamp.sec as i64 * 1_000_000_000 + stamp.nanosec as i64;
@@ -176,6 +177,9 @@ fn event_loop(
                     ),
                 };
                 robots_w.insert(name.clone(), w);
+            }
+            if !send {
+                continue;
             }
             let w = &robots_w[name];
             // flag first, then the pose (robot nodes key everything on the stamp anyway)
@@ -209,6 +213,9 @@ fn event_loop(
                 };
                 machines_w.insert(j, w);
             }
+            if !send {
+                continue;
+            }
             let w = &machines_w[&j];
             if let Some(f) = &w.flag {
                 let _ = f.write(Bool { data: m.part_ready }, Some(ns));
@@ -232,7 +239,12 @@ fn event_loop(
                 };
                 storages_w.insert(k, w);
             }
-            let _ = storages_w[&k].pose.write(pose(s.centre), Some(ns));
+            if send {
+                let _ = storages_w[&k].pose.write(pose(s.centre), Some(ns));
+            }
+        }
+        if !send {
+            return Ok(());
         }
         let _ = markers_pub.publish(core.markers());
         let _ = metrics_pub.publish(core.diagnostics());
@@ -268,9 +280,16 @@ fn event_loop(
         p.rate_hz,
         core.env.n_robots()
     );
-    if p.mode == Mode::Realtime {
-        publish_state(core, node, &mut robots_w, &mut machines_w, &mut storages_w)?;
-    }
+    // Writers exist from the start, so readers have matched them before the first state
+    // (a volatile sample sent before matching is lost).
+    publish_state(
+        core,
+        node,
+        &mut robots_w,
+        &mut machines_w,
+        &mut storages_w,
+        p.mode == Mode::Realtime,
+    )?;
 
     while !stop.load(Ordering::SeqCst) {
         let now = Instant::now();
@@ -358,7 +377,14 @@ fn event_loop(
                         info!("removed /{n}: cmd_vel stale");
                     }
                     core.step(t, false)?;
-                    publish_state(core, node, &mut robots_w, &mut machines_w, &mut storages_w)?;
+                    publish_state(
+                        core,
+                        node,
+                        &mut robots_w,
+                        &mut machines_w,
+                        &mut storages_w,
+                        true,
+                    )?;
                 }
             }
             Mode::Lockstep => {
@@ -371,7 +397,14 @@ fn event_loop(
                             warn!("lockstep start without every initial robot discovered");
                         }
                         started = true;
-                        publish_state(core, node, &mut robots_w, &mut machines_w, &mut storages_w)?;
+                        publish_state(
+                            core,
+                            node,
+                            &mut robots_w,
+                            &mut machines_w,
+                            &mut storages_w,
+                            true,
+                        )?;
                         core.mark_published(t);
                     }
                 } else {
@@ -381,7 +414,14 @@ fn event_loop(
                             info!("removed /{n}: cmd_vel stale");
                         }
                         core.step(t, !all)?;
-                        publish_state(core, node, &mut robots_w, &mut machines_w, &mut storages_w)?;
+                        publish_state(
+                            core,
+                            node,
+                            &mut robots_w,
+                            &mut machines_w,
+                            &mut storages_w,
+                            true,
+                        )?;
                         core.mark_published(t);
                     }
                 }
