@@ -4,6 +4,7 @@
 mod bag_cmd;
 mod bench_sim;
 mod eval_cmd;
+mod fleet;
 mod plot;
 mod render;
 mod sim_cmd;
@@ -28,6 +29,8 @@ struct Cli {
 enum Cmd {
     /// Run episodes of a setup with a scripted policy and print the paper's metrics.
     Sim(sim_cmd::SimArgs),
+    /// Run a fleet: one sim_bridge and one robot_node process per robot, live metrics.
+    Fleet(fleet::FleetArgs),
     /// Measure simulator throughput (agent-steps/s) and write a Markdown report.
     BenchSim(bench_sim::BenchArgs),
     /// Train SMAPPO or MAPPO with PPO (progress, log.csv, curve.png, checkpoints, resume).
@@ -46,6 +49,7 @@ fn main() -> Result<()> {
     let cli = Cli::parse();
     match cli.cmd {
         Cmd::Sim(a) => sim_cmd::run(a),
+        Cmd::Fleet(a) => fleet::run(a),
         Cmd::BenchSim(a) => bench_sim::run(a),
         Cmd::Train(a) => train_cmd::run(a),
         Cmd::Eval(a) => eval_cmd::run(a),
