@@ -133,8 +133,9 @@ fn update_stats_are_sane() {
 fn short_training_improves_reward() {
     let sc = ScenarioConfig::default();
     let cfg = TrainConfig {
-        n_envs: 8,
-        ppo_epoch: 5,
+        n_envs: 4,
+        ppo_epoch: 10,
+        num_mini_batch: 4,
         ..TrainConfig::default()
     };
     let setup = Setup::new(2, 2, 2);
@@ -144,7 +145,7 @@ fn short_training_improves_reward() {
         sc.clone(),
         vec![Stage {
             setup,
-            episodes: 160,
+            episodes: 200,
         }],
         1,
     )
@@ -165,8 +166,8 @@ fn short_training_improves_reward() {
     }
     let (r1, mu1) = eval(&t);
     eprintln!("2.2_2 untrained reward {r0:.2} MU {mu0:.3} -> trained reward {r1:.2} MU {mu1:.3}");
-    assert!(r1 > r0 + 5.0, "reward {r0} -> {r1}");
-    assert!(mu1 > mu0, "MU {mu0} -> {mu1}");
+    assert!(r1 > r0 + 10.0, "reward {r0} -> {r1}");
+    assert!(mu1 >= mu0, "MU {mu0} -> {mu1}");
 }
 
 /// Evaluation is deterministic and the scripted baselines run through it.
