@@ -114,8 +114,17 @@ class Ros:
             if v:
                 return v
             if time.monotonic() >= end:
-                pytest.fail(f'timed out after {timeout:.0f} s waiting for {what}')
+                pytest.fail(f'timed out after {timeout:.0f} s waiting for {what}\n'
+                            f'rclpy graph on domain {self.domain_id}: {self.graph_summary()}')
             self.executor.spin_once(timeout_sec=0.05)
+
+    def graph_summary(self):
+        try:
+            nodes = self.node.get_node_names_and_namespaces()
+            topics = self.node.get_topic_names_and_types()
+            return f'nodes {nodes}; {len(topics)} topics: {[t for t, _ in topics][:40]}'
+        except Exception as e:  # diagnostics only
+            return f'(graph unavailable: {e!r})'
 
     def close(self):
         try:

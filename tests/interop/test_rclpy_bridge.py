@@ -367,3 +367,52 @@ def test_robot_node_tends_in_the_bridge_watched_by_rclpy(tmp_path):
         codes = [p.terminate() for p in reversed(procs)]
         ros.close()
     assert codes == [0, 0], codes
+
+
+def test_lockstep_stamps_are_readable_by_rclpy(tmp_path):
+    """Lockstep (sim_bridge mode:=lockstep, robot_node lockstep:=true): samples without a
+    header carry the simulator state's time as their DDS source timestamp. A stock rclpy
+    subscriber (callback with MessageInfo) reads it: every has_part sample is stamped with
+    the time of a published pose, and robot_0's cmd_vel answers carry the stamp of a pose
+    (state) they answer; the simulation advances only with those answers."""
+    from conftest import ROBOT_NODE
+    require_binary(SIM_BRIDGE)
+    require_binary(ROBOT_NODE)
+    d = next_domain_id()
+    ros = Ros(d, 'lockstep_test')
+    poses, parts, cmds = [], [], []
+    ros.node.create_subscription(PoseStamped, '/robot_0/pose', poses.append, ROBOT_STREAM)
+    ros.node.create_subscription(Bool, '/robot_0/has_part',
+                                 lambda m, info: parts.append(info['source_timestamp']),
+                                 ROBOT_STREAM)
+    ros.node.create_subscription(Twist, '/robot_0/cmd_vel',
+                                 lambda m, info: cmds.append(info['source_timestamp']),
+                                 ROBOT_STREAM)
+    env = child_env(d)
+    procs = [Proc([SIM_BRIDGE, '--ros-args', '-p', 'setup:=1.2_1', '-p', 'mode:=lockstep'],
+                  tmp_path / 'sim_bridge.log', env),
+             Proc([ROBOT_NODE, '--ros-args', '-r', '__ns:=/robot_0', '-p', 'lockstep:=true'],
+                  tmp_path / 'robot_node.log', env)]
+    try:
+        ros.spin_until(lambda: len(cmds) >= 50, DISCOVERY_TIMEOUT_S, '50 lockstep cmd_vel')
+        ros.spin_for(0.3)
+
+        def us(ns):
+            return (ns + 500) // 1000
+        states = {us(m.header.stamp.sec * 1_000_000_000 + m.header.stamp.nanosec)
+                  for m in poses}
+        assert len(states) >= 50
+        stamped_parts = [us(t) for t in parts]
+        assert sum(t in states for t in stamped_parts) >= 0.95 * len(stamped_parts), \
+            'has_part source timestamps are not the pose stamps of the same state'
+        answered = [us(t) for t in cmds]
+        assert sum(t in states for t in answered) >= 0.9 * len(answered), \
+            'cmd_vel source timestamps are not the stamps of published states'
+        print(f'lockstep: {len(states)} states, {len(parts)} has_part, {len(answered)} cmd_vel, '
+              f'{sum(t in states for t in answered)} answering a state; e.g. {answered[:3]} vs {sorted(states)[:3]}')
+        # one answer per state, in order
+        assert answered == sorted(answered) and len(set(answered)) == len(answered)
+    finally:
+        codes = [p.terminate() for p in reversed(procs)]
+        ros.close()
+    assert codes == [0, 0], codes
