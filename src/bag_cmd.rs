@@ -606,27 +606,6 @@ impl Drop for RosNode {
     }
 }
 
-/// The contract topic (ROS name, type, QoS profile) of a discovered DDS topic name.
-fn contract_topic(name: &str) -> Option<(String, &'static MsgDef, Profile)> {
-    let ros = match name.strip_prefix("rt/") {
-        Some(r) => format!("/{r}"),
-        None if name.starts_with('/') => name.to_string(),
-        None => return None,
-    };
-    let fixed = match ros.as_str() {
-        topics::CLOCK => Some((&schema::CLOCK, Profile::Clock)),
-        topics::MARKERS => Some((&schema::MARKER_ARRAY, Profile::Visualization)),
-        topics::METRICS => Some((&schema::DIAGNOSTIC_ARRAY, Profile::Visualization)),
-        topics::COMMAND => Some((&schema::STRING, Profile::RobotStream)),
-        _ => None,
-    };
-    if let Some((def, p)) = fixed {
-        return Some((ros, def, p));
-    }
-    let t = topics::parse_topic(name)?;
-    Some((t.ros_name(), t.msg_def()?, t.profile()?))
-}
-
 type Drain = Box<dyn FnMut(&mut BagWriter) -> Result<usize>>;
 
 fn wall_ns() -> u64 {
@@ -717,7 +696,7 @@ pub fn record(a: RecordArgs) -> Result<()> {
             if Instant::now() >= next_discovery {
                 next_discovery = Instant::now() + period;
                 for d in ros.ctx.discovered_topics() {
-                    let Some((name, def, profile)) = contract_topic(&d.name) else {
+                    let Some((name, def, profile)) = bag::contract_topic(&d.name) else {
                         continue;
                     };
                     if w.has_topic(&name) || refused.contains(&name) {

@@ -20,6 +20,30 @@ pub use metadata::{BagMetadata, TopicInfo};
 pub use reader::{recover, BagMessage, BagReader, RecoverReport, TopicSummary};
 pub use writer::{BagWriter, WriterOptions};
 
+/// The type and QoS profile of a contract topic (ROS name `/robot_3/pose`, or DDS name
+/// `rt/robot_3/pose`): `/clock`, `/tending/{markers,metrics,command}` and every per-entity
+/// topic `msgs::topics::parse_topic` accepts. Returns the ROS name too.
+pub fn contract_topic(name: &str) -> Option<(String, &'static msgs::MsgDef, msgs::Profile)> {
+    use msgs::{schema, topics, Profile};
+    let ros = match name.strip_prefix("rt/") {
+        Some(r) => format!("/{r}"),
+        None if name.starts_with('/') => name.to_string(),
+        None => return None,
+    };
+    let fixed = match ros.as_str() {
+        topics::CLOCK => Some((&schema::CLOCK, Profile::Clock)),
+        topics::MARKERS => Some((&schema::MARKER_ARRAY, Profile::Visualization)),
+        topics::METRICS => Some((&schema::DIAGNOSTIC_ARRAY, Profile::Visualization)),
+        topics::COMMAND => Some((&schema::STRING, Profile::RobotStream)),
+        _ => None,
+    };
+    if let Some((def, p)) = fixed {
+        return Some((ros, def, p));
+    }
+    let t = topics::parse_topic(name)?;
+    Some((t.ros_name(), t.msg_def()?, t.profile()?))
+}
+
 /// The storage file of a bag directory: `<dir-name>_0.mcap`, as rosbag2 names it.
 pub fn mcap_file_name(dir: &std::path::Path) -> String {
     let stem = dir

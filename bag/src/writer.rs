@@ -223,6 +223,30 @@ impl BagWriter {
         self.write(topic, time_ns, &bytes)
     }
 
+    /// Write `msg` on a contract topic (see [`crate::contract_topic`]), adding the topic with
+    /// its contract type and QoS on first use: the one call a publisher needs to record what
+    /// it publishes. A type other than the contract's is an error.
+    pub fn write_contract<M: RosMessage>(
+        &mut self,
+        topic: &str,
+        time_ns: u64,
+        msg: &M,
+    ) -> Result<()> {
+        if !self.has_topic(topic) {
+            let (name, def, profile) = crate::contract_topic(topic)
+                .with_context(|| format!("{topic} is not a contract topic"))?;
+            if !std::ptr::eq(def, M::DEF) {
+                bail!(
+                    "{topic} carries {} in the contract, not {}",
+                    def.full_name(),
+                    M::DEF.full_name()
+                );
+            }
+            self.add_topic(&name, def, &profile.offered_qos_yaml())?;
+        }
+        self.write_msg(topic, time_ns, msg)
+    }
+
     /// [`write`](Self::write) with distinct log and publish times.
     pub fn write_full(
         &mut self,

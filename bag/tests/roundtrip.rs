@@ -335,3 +335,27 @@ fn recover_after_truncation_at_many_offsets() {
     let _ = std::fs::remove_dir_all(&out);
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+#[test]
+fn write_contract_adds_topics_with_contract_type_and_qos() {
+    let dir = tmp("contract");
+    let mut w = BagWriter::create(&dir).unwrap();
+    let p = PoseStamped::planar(Time::default(), "map", 1.0, 2.0);
+    w.write_contract("/robot_3/pose", 5, &p).unwrap();
+    w.write_contract("/robot_3/pose", 6, &p).unwrap();
+    w.write_contract("/machine_1/part_ready", 7, &Bool { data: true })
+        .unwrap();
+    w.write_contract("/clock", 8, &Clock::default()).unwrap();
+    assert!(w.write_contract("/robot_3/has_part", 9, &p).is_err()); // wrong type
+    assert!(w.write_contract("/not/contract/x", 9, &p).is_err());
+    w.finish().unwrap();
+    let r = BagReader::open_strict(&dir).unwrap();
+    assert_eq!(r.messages.len(), 4);
+    let t = &r.topics[r.topic_index("/machine_1/part_ready").unwrap()];
+    assert_eq!(t.type_name, "std_msgs/msg/Bool");
+    assert_eq!(t.qos_yaml, Profile::PartReady.offered_qos_yaml());
+    let t = &r.topics[r.topic_index("/robot_3/pose").unwrap()];
+    assert_eq!(t.qos_yaml, Profile::RobotStream.offered_qos_yaml());
+    assert_eq!(t.message_count, 2);
+    let _ = std::fs::remove_dir_all(&dir);
+}
