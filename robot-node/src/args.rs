@@ -62,6 +62,9 @@ pub struct Params {
     /// after `lockstep_wait_s`), and tag cmd_vel with the state's stamp. Implies sim time.
     pub lockstep: bool,
     pub lockstep_wait_s: f64,
+    /// Also print the counters as one JSON object per line on stdout (every stats period
+    /// and on exit, with `"final": true`), for benchmarks and launchers.
+    pub stats_json: bool,
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -93,6 +96,7 @@ impl Default for Params {
             storage_half: [0.15, 0.08],
             lockstep: false,
             lockstep_wait_s: 0.5,
+            stats_json: false,
         }
     }
 }
@@ -117,7 +121,8 @@ parameters: policy (path), controller (greedy|policy), control_rate_hz (10), use
             k_speed (0.5), stale_timeout_s (1.0), static_stale_timeout_s (= stale_timeout_s, <=0 off),
             room_margin (0.25), stats_period_s (10), discovery_period_s (0.5),
             robot_radius (0.08), machine_half_x/_y (0.12), storage_half_x (0.15), storage_half_y (0.08),
-            lockstep (false; implies use_sim_time), lockstep_wait_s (0.5)
+            lockstep (false; implies use_sim_time), lockstep_wait_s (0.5),
+            stats_json (false; counters as JSON lines on stdout)
 environment: ROS_DOMAIN_ID (0)";
 
 /// Parse the process arguments (without argv\[0\]) and `ROS_DOMAIN_ID`.
@@ -246,6 +251,15 @@ fn apply_param(p: &mut Params, name: &str, v: &ParamValue) -> Result<Applied, Ar
             }
         },
         "discovery_period_s" => p.discovery_period_s = positive(name, v)?,
+        "stats_json" => match v {
+            ParamValue::Bool(b) => p.stats_json = *b,
+            other => {
+                return Err(ArgError::Param {
+                    name: name.into(),
+                    msg: format!("expected true or false, got {other:?}"),
+                })
+            }
+        },
         _ => return Ok(Applied::Unknown),
     }
     Ok(Applied::Yes)
@@ -264,6 +278,13 @@ mod tests {
         let p = parse_ok(&[]);
         assert_eq!(p, Params::default());
         assert_eq!(p.fully_qualified_name(), "/robot_node");
+    }
+
+    #[test]
+    fn stats_json_flag() {
+        assert!(!parse_ok(&[]).stats_json);
+        assert!(parse_ok(&["--ros-args", "-p", "stats_json:=true"]).stats_json);
+        assert!(parse(["--ros-args", "-p", "stats_json:=3"], None).is_err());
     }
 
     #[test]

@@ -393,6 +393,11 @@ fn event_loop(
                     }
                     sim_last_t = st;
                     let idx = (st * p.control_rate_hz + 1e-6).floor() as i64;
+                    if let Some(l) = sim_last_index {
+                        if idx > l + 1 {
+                            brain.counters.ticks_missed += (idx - l - 1) as u64;
+                        }
+                    }
                     if sim_last_index.is_none_or(|l| idx > l) {
                         sim_last_index = Some(idx);
                         true
@@ -405,6 +410,14 @@ fn event_loop(
         } else {
             let now = Instant::now();
             if now >= next_tick {
+                let late = now - next_tick;
+                brain.counters.tick_late_max_us =
+                    brain.counters.tick_late_max_us.max(late.as_micros() as u64);
+                if late > period {
+                    // woke more than one period late: the skipped periods are missed ticks
+                    brain.counters.ticks_missed +=
+                        (late.as_secs_f64() / period.as_secs_f64()).floor().max(1.0) as u64;
+                }
                 next_tick += period;
                 if next_tick < now {
                     next_tick = now + period; // overrun: skip, do not burst
@@ -442,6 +455,9 @@ fn event_loop(
                 "counters: {} | known machines={m} storages={s} peers={r}",
                 brain.counters
             );
+            if p.stats_json {
+                print_stats_json(me, &brain.counters, t0, false);
+            }
         }
     }
 
@@ -449,6 +465,9 @@ fn event_loop(
     publish(&mut brain, [0.0, 0.0], None);
     rosout!(log, LogLevel::Info, "stopping: published zero cmd_vel");
     info!("final counters: {}", brain.counters);
+    if p.stats_json {
+        print_stats_json(me, &brain.counters, t0, true);
+    }
     // give the reliable writer a moment to deliver the zero command before teardown
     let until = Instant::now() + Duration::from_millis(300);
     while Instant::now() < until {
@@ -458,6 +477,18 @@ fn event_loop(
         poll.registry().deregister(&mut c).ok();
     }
     Ok(brain.counters)
+}
+
+/// One machine-readable stats line on stdout (`-p stats_json:=true`).
+fn print_stats_json(me: &str, c: &Counters, t0: Instant, last: bool) {
+    use std::io::Write;
+    let mut v = c.to_json();
+    v["robot"] = me.into();
+    v["uptime_s"] = t0.elapsed().as_secs_f64().into();
+    v["final"] = last.into();
+    let mut out = std::io::stdout().lock();
+    let _ = writeln!(out, "{v}");
+    let _ = out.flush();
 }
 
 fn drain(sub: &Sub, brain: &mut Brain, now: f64) {

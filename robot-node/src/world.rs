@@ -64,6 +64,12 @@ pub struct Counters {
     pub subscriptions: u64,
     /// Lockstep: states acted on before every expected entity of that stamp was in.
     pub lockstep_wait_timeouts: u64,
+    /// Control periods missed: wall clock, a tick that ran more than one period after its
+    /// scheduled time (each whole period of lateness is one missed, skipped tick); sim time,
+    /// tick indices skipped between two `/clock` updates. Not counted in lockstep.
+    pub ticks_missed: u64,
+    /// Wall clock: largest lateness of a tick behind its scheduled time, microseconds.
+    pub tick_late_max_us: u64,
 }
 
 impl Counters {
@@ -83,13 +89,42 @@ impl Counters {
     }
 }
 
+impl Counters {
+    /// The counters as one JSON object (machine-readable stats line).
+    pub fn to_json(&self) -> serde_json::Value {
+        serde_json::json!({
+            "accepted": self.accepted,
+            "dropped": {
+                "decode": self.dropped_decode,
+                "non_finite": self.dropped_non_finite,
+                "out_of_room": self.dropped_out_of_room,
+                "unexpected": self.dropped_unexpected,
+            },
+            "ticks": self.ticks,
+            "commands": self.commands,
+            "zero": {
+                "own_stale": self.zero_own_stale,
+                "obs_invalid": self.zero_obs_invalid,
+                "controller_error": self.zero_controller_error,
+                "bad_output": self.zero_bad_output,
+            },
+            "publish_errors": self.publish_errors,
+            "subscriptions": self.subscriptions,
+            "lockstep_wait_timeouts": self.lockstep_wait_timeouts,
+            "ticks_missed": self.ticks_missed,
+            "tick_late_max_us": self.tick_late_max_us,
+        })
+    }
+}
+
 impl std::fmt::Display for Counters {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         write!(
             f,
             "accepted={} dropped(decode={} non_finite={} out_of_room={} unexpected={}) \
              ticks={} commands={} zero(own_stale={} obs_invalid={} controller_error={} bad_output={}) \
-             publish_errors={} subscriptions={} lockstep_wait_timeouts={}",
+             publish_errors={} subscriptions={} lockstep_wait_timeouts={} \
+             ticks_missed={} tick_late_max_us={}",
             self.accepted,
             self.dropped_decode,
             self.dropped_non_finite,
@@ -103,7 +138,9 @@ impl std::fmt::Display for Counters {
             self.zero_bad_output,
             self.publish_errors,
             self.subscriptions,
-            self.lockstep_wait_timeouts
+            self.lockstep_wait_timeouts,
+            self.ticks_missed,
+            self.tick_late_max_us
         )
     }
 }

@@ -1,0 +1,198 @@
+#!/usr/bin/env python3
+"""robot_node ROS 2 benchmarks (see docs/bench/ros.md). Loopback only, every run bounded.
+
+  bench.py latency --reps 3 --n 200 --policy CKPT      state-in -> cmd_vel-out (lockstep), bare RTT
+  bench.py fleet --sizes 5,10,20 --reps 3 --secs 30     N robot_node processes + sim_bridge, realtime 10 Hz
+  bench.py report                                       markdown tables from out/*.jsonl
+
+Results append to bench/ros/out/{latency,fleet}.jsonl, one JSON object per run, each with
+the load average of the machine before and after the run.
+"""
+import argparse, json, os, signal, statistics, subprocess, sys, time
+
+ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+REL = os.path.join(ROOT, "target", "release")
+OUT = os.path.join(ROOT, "bench", "ros", "out")
+TCK = os.sysconf("SC_CLK_TCK")
+
+
+def loadavg():
+    with open("/proc/loadavg") as f:
+        return [float(x) for x in f.read().split()[:3]]
+
+
+def cpu_ticks(pid):
+    try:
+        with open(f"/proc/{pid}/stat") as f:
+            s = f.read()
+        rest = s[s.rfind(")") + 2:].split()
+        return int(rest[11]) + int(rest[12])
+    except (OSError, IndexError, ValueError):
+        return None
+
+
+def rss_kb(pid):
+    try:
+        with open(f"/proc/{pid}/status") as f:
+            for line in f:
+                if line.startswith("VmRSS:"):
+                    return int(line.split()[1])
+    except OSError:
+        pass
+    return None
+
+
+def append(name, obj):
+    os.makedirs(OUT, exist_ok=True)
+    with open(os.path.join(OUT, name), "a") as f:
+        f.write(json.dumps(obj) + "\n")
+
+
+def latency(a):
+    ctrls = [("greedy", "")]
+    if a.policy:
+        ctrls.append(("policy", a.policy))
+    for rep in range(a.reps):
+        for name, pol in ctrls:
+            la0 = loadavg()
+            cmd = [os.path.join(REL, "ros_bench"), "latency", "--robot-node", os.path.join(REL, "robot_node"),
+                   "--n", str(a.n), "--interval-ms", str(a.interval_ms), "--domain", str(150 + rep * 4 + len(name) % 4)]
+            if pol:
+                cmd += ["--policy", pol]
+            r = subprocess.run(cmd, capture_output=True, text=True, timeout=a.n * a.interval_ms / 1000 * 2 + 90)
+            line = [l for l in r.stdout.splitlines() if l.startswith("{")]
+            if r.returncode != 0 or not line:
+                print(f"latency {name} rep {rep}: failed rc={r.returncode}\n{r.stderr[-2000:]}", file=sys.stderr)
+                continue
+            v = json.loads(line[-1])
+            v.update(kind=name, rep=rep, interval_ms=a.interval_ms, loadavg_before=la0, loadavg_after=loadavg(),
+                     time=time.strftime("%Y-%m-%dT%H:%M:%S"))
+            append("latency.jsonl", v)
+            print(f"latency {name:6} rep {rep} int {a.interval_ms} ms: state->cmd p50 {v['state_first_write_to_cmd_us']['p50']:.0f} us "
+                  f"p99 {v['state_first_write_to_cmd_us']['p99']:.0f} us | bare RTT p50 {v['bare_round_trip_us']['p50']:.0f} us "
+                  f"p99 {v['bare_round_trip_us']['p99']:.0f} us | load {la0[0]:.2f}", flush=True)
+
+
+SETUPS = {5: "5.4_2", 6: "6.4_2", 10: "10.6_4", 20: "20.12_4", 30: "30.20_10", 40: "40.24_8"}
+
+
+def fleet_run(n, secs, warm, policy, domain, tag):
+    setup = SETUPS.get(n, f"{n}.{max(2, n // 2)}_{max(2, n // 5)}")
+    logdir = os.path.join(OUT, "logs", f"fleet-{tag}")
+    os.makedirs(logdir, exist_ok=True)
+    env = dict(os.environ, ROS_DOMAIN_ID=str(domain), RUST_LOG="info,rustdds=warn,ros2_client=warn")
+    nodes = []
+    for i in range(n):
+        args = [os.path.join(REL, "robot_node"), "--ros-args", "-r", f"__ns:=/robot_{i}",
+                "-p", "control_rate_hz:=10", "-p", "stale_timeout_s:=2.0", "-p", "stats_json:=true",
+                "-p", "stats_period_s:=3600"]
+        if policy:
+            args += ["-p", f"policy:={policy}"]
+        out = open(os.path.join(logdir, f"robot_{i}.jsonl"), "w")
+        err = open(os.path.join(logdir, f"robot_{i}.log"), "w")
+        nodes.append((subprocess.Popen(args, env=env, stdout=out, stderr=err, stdin=subprocess.DEVNULL,
+                                       start_new_session=True), out, err))
+    bout = open(os.path.join(logdir, "sim_bridge.jsonl"), "w")
+    berr = open(os.path.join(logdir, "sim_bridge.log"), "w")
+    bridge = subprocess.Popen([os.path.join(REL, "sim_bridge"), "--ros-args", "-p", f"setup:={setup}",
+                               "-p", "mode:=realtime", "-p", "rate_hz:=10", "-p", "seed:=0"],
+                              env=env, stdout=bout, stderr=berr, stdin=subprocess.DEVNULL, start_new_session=True)
+    la0 = loadavg()
+    time.sleep(warm)
+    pids = [p.pid for p, _, _ in nodes]
+    c0 = {pid: cpu_ticks(pid) for pid in pids + [bridge.pid]}
+    t0 = time.monotonic()
+    time.sleep(secs - warm)
+    dt = time.monotonic() - t0
+    c1 = {pid: cpu_ticks(pid) for pid in pids + [bridge.pid]}
+    rss = [rss_kb(pid) for pid in pids]
+    la1 = loadavg()
+    alive = sum(1 for p, _, _ in nodes if p.poll() is None)
+    # stop: robots and bridge get SIGINT, bounded wait, then SIGKILL
+    for p in [bridge] + [p for p, _, _ in nodes]:
+        if p.poll() is None:
+            p.send_signal(signal.SIGINT)
+    deadline = time.monotonic() + 10
+    for p in [bridge] + [p for p, _, _ in nodes]:
+        try:
+            p.wait(timeout=max(0.1, deadline - time.monotonic()))
+        except subprocess.TimeoutExpired:
+            p.kill()
+            p.wait()
+    for _, o, e in nodes:
+        o.close(); e.close()
+    bout.close(); berr.close()
+
+    def pct(pid):
+        a, b = c0.get(pid), c1.get(pid)
+        return None if a is None or b is None else (b - a) / TCK / dt * 100.0
+
+    robots = []
+    for i, pid in enumerate(pids):
+        fin = None
+        with open(os.path.join(logdir, f"robot_{i}.jsonl")) as f:
+            for line in f:
+                try:
+                    v = json.loads(line)
+                except ValueError:
+                    continue
+                if v.get("final"):
+                    fin = v
+        robots.append(dict(robot=i, cpu_pct=pct(pid), rss_kb=rss[i], final=fin))
+    metrics = None
+    with open(os.path.join(logdir, "sim_bridge.jsonl")) as f:
+        for line in f:
+            if line.startswith("{"):
+                metrics = json.loads(line)
+    fin = [r["final"] for r in robots if r["final"]]
+    ticks = sum(r["ticks"] for r in fin)
+    missed = sum(r["ticks_missed"] for r in fin)
+    per_node = [r["final"]["ticks_missed"] / max(1, r["final"]["ticks"] + r["final"]["ticks_missed"]) * 100
+                for r in robots if r["final"]]
+    return dict(robots_n=n, setup=setup, secs=secs, cpu_window_s=dt, policy=policy, alive_at_end=alive,
+                finals=len(fin), ticks=ticks, ticks_missed=missed,
+                missed_pct=missed / max(1, ticks + missed) * 100, missed_pct_worst_node=max(per_node) if per_node else None,
+                tick_late_max_us=max((r["tick_late_max_us"] for r in fin), default=None),
+                commands=sum(r["commands"] for r in fin), zero_own_stale=sum(r["zero"]["own_stale"] for r in fin),
+                cpu_pct_per_node_median=statistics.median([r["cpu_pct"] for r in robots if r["cpu_pct"] is not None]),
+                cpu_pct_nodes_total=sum(r["cpu_pct"] for r in robots if r["cpu_pct"] is not None),
+                cpu_pct_bridge=pct(bridge.pid),
+                rss_kb_per_node_median=statistics.median([r["rss_kb"] for r in robots if r["rss_kb"]]),
+                bridge_metrics=metrics, robots=robots, loadavg_before=la0, loadavg_after=la1,
+                time=time.strftime("%Y-%m-%dT%H:%M:%S"))
+
+
+def fleet(a):
+    for rep in range(a.reps):
+        for n in [int(x) for x in a.sizes.split(",")]:
+            tag = f"{n}-r{rep}"
+            v = fleet_run(n, a.secs, a.warm, a.policy, 170 + rep * 8 + n % 8, tag)
+            v["rep"] = rep
+            append("fleet.jsonl", v)
+            print(f"fleet {n:3} rep {rep}: missed {v['ticks_missed']}/{v['ticks']} ({v['missed_pct']:.2f}%, worst node "
+                  f"{v['missed_pct_worst_node']}) late_max {v['tick_late_max_us']} us | cpu/node {v['cpu_pct_per_node_median']:.1f}% "
+                  f"nodes {v['cpu_pct_nodes_total']:.0f}% bridge {v['cpu_pct_bridge']:.0f}% | rss {v['rss_kb_per_node_median']} kB | "
+                  f"finals {v['finals']}/{n} own_stale {v['zero_own_stale']} delivered "
+                  f"{(v['bridge_metrics'] or {}).get('parts_delivered')} | load {v['loadavg_before'][0]:.2f}", flush=True)
+
+
+def main():
+    ap = argparse.ArgumentParser()
+    sub = ap.add_subparsers(dest="cmd", required=True)
+    l = sub.add_parser("latency")
+    l.add_argument("--reps", type=int, default=3)
+    l.add_argument("--n", type=int, default=200)
+    l.add_argument("--interval-ms", type=int, default=100)
+    l.add_argument("--policy", default="")
+    f = sub.add_parser("fleet")
+    f.add_argument("--sizes", default="5,10,20")
+    f.add_argument("--reps", type=int, default=3)
+    f.add_argument("--secs", type=float, default=30)
+    f.add_argument("--warm", type=float, default=5)
+    f.add_argument("--policy", default="")
+    a = ap.parse_args()
+    {"latency": latency, "fleet": fleet}[a.cmd](a)
+
+
+if __name__ == "__main__":
+    main()
