@@ -10,6 +10,7 @@ fully qualified node name) is reproduced and run against the real robot_node.
 
 import importlib.util
 import os
+import re
 import subprocess
 import sys
 import types
@@ -265,3 +266,30 @@ def test_robot_node_accepts_the_command_line_launch_ros_builds(monkeypatch, tmp_
                    DISCOVERY_TIMEOUT_S, 'a command on /robot_2/cmd_vel')
     assert 'robot_node /robot_2/robot_node up' in p.text()
     assert 'wall clock' in p.text() and 'controller greedy' in p.text()
+
+
+def test_sim_bridge_accepts_the_command_line_launch_ros_builds(monkeypatch, tmp_path, ros,
+                                                                spawn):
+    """The launch file's bridge node as launch_ros runs it:
+    `sim_bridge --ros-args -r __node:=sim_bridge --params-file F`, F keyed `/sim_bridge`
+    (launch_ros yaml-dumps str values, so `10.6_4` stays a string); the setup and seed from
+    the file take effect (10 robots on the graph)."""
+    require_binary(SIM_BRIDGE)
+    nodes = launch(SCRIPTS / 'fleet.launch.py', monkeypatch, setup='10.6_4', seed='5')
+    b = nodes[0]
+    assert b['executable'] == 'sim_bridge' and 'namespace' not in b
+    params = {}
+    for d in b['parameters']:
+        params.update(d)
+    pfile = tmp_path / 'launch_params_bridge'
+    pfile.write_text(yaml.dump({f"/{b['name']}": {'ros__parameters': params}},
+                               default_flow_style=False))
+    p = spawn([SIM_BRIDGE, '--ros-args', '-r', f"__node:={b['name']}", '--params-file',
+               str(pfile)], name='sim_bridge')
+    ros.spin_until(lambda: any(t == '/robot_9/pose' for t, _ in
+                               ros.node.get_topic_names_and_types()),
+                   DISCOVERY_TIMEOUT_S, '/robot_9/pose of a 10-robot setup')
+    assert re.search(r'setup 10\.6_4, seed 5\b', p.text()), p.text()[-1500:]
+    assert ('sim_bridge', '/') in ros.spin_until(
+        lambda: (lambda n: n if ('sim_bridge', '/') in n else None)(
+            ros.node.get_node_names_and_namespaces()), 10.0, 'node /sim_bridge')
