@@ -36,3 +36,18 @@ unset ROS_LOCALHOST_ONLY ROS_AUTOMATIC_DISCOVERY_RANGE ROS_STATIC_PEERS FASTRTPS
 # No tests collected = pytest exit 5 = failure (set -e).
 timeout 900 "$venv/bin/python" -m pytest tests/interop -q -rsxR --reruns 1 --reruns-delay 1 \
     -p no:cacheprovider
+
+# Python: rosbag2 MCAP bags written by `tending` read back by the `rosbags` and
+# `mcap` + `mcap-ros2-support` packages (own venv, same reinstall rule).
+echo "== python bag tests (tests/bags)"
+venv_b="target/venv-bags"
+stamp_b="$venv_b/.requirements.sha256"
+want_b="$(sha256sum tests/bags/requirements.txt | cut -d' ' -f1) $("$py_sys" -c 'import sys; print(sys.version.split()[0])')"
+if [ ! -x "$venv_b/bin/python" ] || [ "$(cat "$stamp_b" 2>/dev/null)" != "$want_b" ]; then
+    rm -rf "$venv_b"
+    "$py_sys" -m venv "$venv_b"
+    "$venv_b/bin/python" -m pip install --quiet --disable-pip-version-check \
+        -r tests/bags/requirements.txt
+    echo "$want_b" > "$stamp_b"
+fi
+timeout 600 "$venv_b/bin/python" -m pytest tests/bags -q -rs -p no:cacheprovider
