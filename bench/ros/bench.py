@@ -73,23 +73,30 @@ def latency(a):
                   f"p99 {v['bare_round_trip_us']['p99']:.0f} us | load {la0[0]:.2f}", flush=True)
 
 
-SETUPS = {5: "5.4_2", 6: "6.4_2", 10: "10.6_4", 20: "20.12_4", 30: "30.20_10", 40: "40.24_8"}
+SETUPS = {5: "5.4_2", 6: "6.4_2", 10: "10.6_4", 20: "20.12_4", 50: "50.16_4", 100: "100.16_2"}
 
 
-def fleet_run(n, secs, warm, policy, domain, tag):
-    setup = SETUPS.get(n, f"{n}.{max(2, n // 2)}_{max(2, n // 5)}")
+def fleet_run(n, secs, warm, policy, domain, tag, multi=False):
+    """n robots at 10 Hz on a realtime sim_bridge: one robot_node process per robot, or
+    (multi) one robot_node process hosting all n robots (-p robots:=robot_0..n-1)."""
+    setup = SETUPS.get(n, f"{n}.{max(2, n // 6)}_{max(2, n // 25)}")
     logdir = os.path.join(OUT, "logs", f"fleet-{tag}")
     os.makedirs(logdir, exist_ok=True)
     env = dict(os.environ, ROS_DOMAIN_ID=str(domain), RUST_LOG="info,rustdds=warn,ros2_client=warn")
+    groups = [["robot_0..%d" % (n - 1)]] if multi else [[f"__ns:=/robot_{i}"] for i in range(n)]
     nodes = []
-    for i in range(n):
-        args = [os.path.join(REL, "robot_node"), "--ros-args", "-r", f"__ns:=/robot_{i}",
-                "-p", "control_rate_hz:=10", "-p", "stale_timeout_s:=2.0", "-p", "stats_json:=true",
-                "-p", "stats_period_s:=3600"]
+    for gi, g in enumerate(groups):
+        args = [os.path.join(REL, "robot_node"), "--ros-args"]
+        if multi:
+            args += ["-p", f"robots:={g[0]}"]
+        else:
+            args += ["-r", g[0]]
+        args += ["-p", "control_rate_hz:=10", "-p", "stale_timeout_s:=2.0", "-p", "stats_json:=true",
+                 "-p", "stats_period_s:=3600"]
         if policy:
             args += ["-p", f"policy:={policy}"]
-        out = open(os.path.join(logdir, f"robot_{i}.jsonl"), "w")
-        err = open(os.path.join(logdir, f"robot_{i}.log"), "w")
+        out = open(os.path.join(logdir, f"node_{gi}.jsonl"), "w")
+        err = open(os.path.join(logdir, f"node_{gi}.log"), "w")
         nodes.append((subprocess.Popen(args, env=env, stdout=out, stderr=err, stdin=subprocess.DEVNULL,
                                        start_new_session=True), out, err))
     bout = open(os.path.join(logdir, "sim_bridge.jsonl"), "w")
@@ -112,13 +119,15 @@ def fleet_run(n, secs, warm, policy, domain, tag):
     for p in [bridge] + [p for p, _, _ in nodes]:
         if p.poll() is None:
             p.send_signal(signal.SIGINT)
-    deadline = time.monotonic() + 10
+    deadline = time.monotonic() + 15
+    killed = 0
     for p in [bridge] + [p for p, _, _ in nodes]:
         try:
             p.wait(timeout=max(0.1, deadline - time.monotonic()))
         except subprocess.TimeoutExpired:
             p.kill()
             p.wait()
+            killed += 1
     for _, o, e in nodes:
         o.close(); e.close()
     bout.close(); berr.close()
@@ -127,53 +136,55 @@ def fleet_run(n, secs, warm, policy, domain, tag):
         a, b = c0.get(pid), c1.get(pid)
         return None if a is None or b is None else (b - a) / TCK / dt * 100.0
 
-    robots = []
-    for i, pid in enumerate(pids):
-        fin = None
-        with open(os.path.join(logdir, f"robot_{i}.jsonl")) as f:
+    fin = []
+    for gi in range(len(nodes)):
+        with open(os.path.join(logdir, f"node_{gi}.jsonl")) as f:
             for line in f:
                 try:
                     v = json.loads(line)
                 except ValueError:
                     continue
                 if v.get("final"):
-                    fin = v
-        robots.append(dict(robot=i, cpu_pct=pct(pid), rss_kb=rss[i], final=fin))
+                    fin.append(v)
     metrics = None
     with open(os.path.join(logdir, "sim_bridge.jsonl")) as f:
         for line in f:
             if line.startswith("{"):
                 metrics = json.loads(line)
-    fin = [r["final"] for r in robots if r["final"]]
     ticks = sum(r["ticks"] for r in fin)
     missed = sum(r["ticks_missed"] for r in fin)
-    per_node = [r["final"]["ticks_missed"] / max(1, r["final"]["ticks"] + r["final"]["ticks_missed"]) * 100
-                for r in robots if r["final"]]
-    return dict(robots_n=n, setup=setup, secs=secs, cpu_window_s=dt, policy=policy, alive_at_end=alive,
+    per_node = [r["ticks_missed"] / max(1, r["ticks"] + r["ticks_missed"]) * 100 for r in fin]
+    cpus = [pct(pid) for pid in pids]
+    cpus = [c for c in cpus if c is not None]
+    per_robot_cpu = [c / (n if multi else 1) for c in cpus]
+    return dict(robots_n=n, multi=multi, processes=len(nodes), setup=setup, secs=secs, cpu_window_s=dt,
+                policy=policy, alive_at_end=alive, killed=killed,
                 finals=len(fin), ticks=ticks, ticks_missed=missed,
                 missed_pct=missed / max(1, ticks + missed) * 100, missed_pct_worst_node=max(per_node) if per_node else None,
                 tick_late_max_us=max((r["tick_late_max_us"] for r in fin), default=None),
                 commands=sum(r["commands"] for r in fin), zero_own_stale=sum(r["zero"]["own_stale"] for r in fin),
-                cpu_pct_per_node_median=statistics.median([r["cpu_pct"] for r in robots if r["cpu_pct"] is not None]),
-                cpu_pct_nodes_total=sum(r["cpu_pct"] for r in robots if r["cpu_pct"] is not None),
-                cpu_pct_bridge=pct(bridge.pid),
-                rss_kb_per_node_median=statistics.median([r["rss_kb"] for r in robots if r["rss_kb"]]),
-                bridge_metrics=metrics, robots=robots, loadavg_before=la0, loadavg_after=la1,
-                time=time.strftime("%Y-%m-%dT%H:%M:%S"))
+                subscriptions_median=statistics.median([r["subscriptions"] for r in fin]) if fin else None,
+                cpu_pct_per_robot_median=statistics.median(per_robot_cpu) if per_robot_cpu else None,
+                cpu_pct_nodes_total=sum(cpus), cpu_pct_bridge=pct(bridge.pid),
+                rss_kb_per_process_median=statistics.median([r for r in rss if r]) if any(rss) else None,
+                bridge_metrics=metrics, finals_detail=fin, cpu_pct_per_process=cpus, rss_kb=rss,
+                loadavg_before=la0, loadavg_after=la1, time=time.strftime("%Y-%m-%dT%H:%M:%S"))
 
 
 def fleet(a):
     for rep in range(a.reps):
         for n in [int(x) for x in a.sizes.split(",")]:
-            tag = f"{n}-r{rep}"
-            v = fleet_run(n, a.secs, a.warm, a.policy, 170 + rep * 8 + n % 8, tag)
+            tag = f"{n}-{'multi' if a.multi else 'procs'}-r{rep}"
+            v = fleet_run(n, a.secs, a.warm, a.policy, 170 + rep * 8 + n % 8 + (40 if a.multi else 0), tag, a.multi)
             v["rep"] = rep
             append("fleet.jsonl", v)
-            print(f"fleet {n:3} rep {rep}: missed {v['ticks_missed']}/{v['ticks']} ({v['missed_pct']:.2f}%, worst node "
-                  f"{v['missed_pct_worst_node']}) late_max {v['tick_late_max_us']} us | cpu/node {v['cpu_pct_per_node_median']:.1f}% "
-                  f"nodes {v['cpu_pct_nodes_total']:.0f}% bridge {v['cpu_pct_bridge']:.0f}% | rss {v['rss_kb_per_node_median']} kB | "
-                  f"finals {v['finals']}/{n} own_stale {v['zero_own_stale']} delivered "
-                  f"{(v['bridge_metrics'] or {}).get('parts_delivered')} | load {v['loadavg_before'][0]:.2f}", flush=True)
+            f = lambda x, d=1: "-" if x is None else f"{x:.{d}f}"
+            print(f"fleet {n:3} {'1 proc' if a.multi else 'procs '} rep {rep}: missed {v['ticks_missed']}/{v['ticks']} "
+                  f"({f(v['missed_pct'], 2)}%, worst robot {f(v['missed_pct_worst_node'], 2)}%) late_max {v['tick_late_max_us']} us | "
+                  f"cpu/robot {f(v['cpu_pct_per_robot_median'])}% nodes {f(v['cpu_pct_nodes_total'], 0)}% bridge "
+                  f"{f(v['cpu_pct_bridge'], 0)}% | rss/proc {v['rss_kb_per_process_median']} kB | finals {v['finals']}/{n} "
+                  f"subs {v['subscriptions_median']} own_stale {v['zero_own_stale']} cmds {v['commands']} | "
+                  f"load {v['loadavg_before'][0]:.2f}->{v['loadavg_after'][0]:.2f}", flush=True)
 
 
 def main():
@@ -190,6 +201,7 @@ def main():
     f.add_argument("--secs", type=float, default=30)
     f.add_argument("--warm", type=float, default=5)
     f.add_argument("--policy", default="")
+    f.add_argument("--multi", action="store_true", help="all robots in one robot_node process")
     a = ap.parse_args()
     {"latency": latency, "fleet": fleet}[a.cmd](a)
 

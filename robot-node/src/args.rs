@@ -65,6 +65,10 @@ pub struct Params {
     /// Also print the counters as one JSON object per line on stdout (every stats period
     /// and on exit, with `"final": true`), for benchmarks and launchers.
     pub stats_json: bool,
+    /// Multi-robot mode: these robots (ids such as `robot_3`) in one process, sharing one
+    /// DDS context, one node and one event-loop thread each, in namespace `/<robot>`.
+    /// Empty: one robot, identified by the namespace.
+    pub robots: Vec<String>,
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -97,6 +101,7 @@ impl Default for Params {
             lockstep: false,
             lockstep_wait_s: 0.5,
             stats_json: false,
+            robots: Vec::new(),
         }
     }
 }
@@ -122,7 +127,8 @@ parameters: policy (path), controller (greedy|policy), control_rate_hz (10), use
             room_margin (0.25), stats_period_s (10), discovery_period_s (0.5),
             robot_radius (0.08), machine_half_x/_y (0.12), storage_half_x (0.15), storage_half_y (0.08),
             lockstep (false; implies use_sim_time), lockstep_wait_s (0.5),
-            stats_json (false; counters as JSON lines on stdout)
+            stats_json (false; counters as JSON lines on stdout),
+            robots (multi-robot mode: robot_0,robot_1,... or robot_0..N-1 in one process)
 environment: ROS_DOMAIN_ID (0)";
 
 /// Parse the process arguments (without argv\[0\]) and `ROS_DOMAIN_ID`.
@@ -251,6 +257,7 @@ fn apply_param(p: &mut Params, name: &str, v: &ParamValue) -> Result<Applied, Ar
             }
         },
         "discovery_period_s" => p.discovery_period_s = positive(name, v)?,
+        "robots" => p.robots = parse_robots(name, v)?,
         "stats_json" => match v {
             ParamValue::Bool(b) => p.stats_json = *b,
             other => {
@@ -263,6 +270,48 @@ fn apply_param(p: &mut Params, name: &str, v: &ParamValue) -> Result<Applied, Ar
         _ => return Ok(Applied::Unknown),
     }
     Ok(Applied::Yes)
+}
+
+/// `robot_0,robot_3` or the range form `robot_0..5` (= robot_0 .. robot_5).
+fn parse_robots(name: &str, v: &ParamValue) -> Result<Vec<String>, ArgError> {
+    let bad = |msg: String| ArgError::Param {
+        name: name.into(),
+        msg,
+    };
+    let s = match v {
+        ParamValue::Str(s) => s.clone(),
+        other => return Err(bad(format!("expected robot ids, got {other:?}"))),
+    };
+    let mut out: Vec<String> = Vec::new();
+    for item in s.split(',').map(str::trim).filter(|x| !x.is_empty()) {
+        if let Some((head, last)) = item.split_once("..") {
+            let (prefix, first) = head
+                .rsplit_once('_')
+                .ok_or_else(|| bad(format!("range `{item}` must look like robot_0..9")))?;
+            let a: u32 = first
+                .parse()
+                .map_err(|_| bad(format!("bad range start in `{item}`")))?;
+            let b: u32 = last
+                .parse()
+                .map_err(|_| bad(format!("bad range end in `{item}`")))?;
+            if b < a || b - a >= 10_000 {
+                return Err(bad(format!("bad range `{item}`")));
+            }
+            out.extend((a..=b).map(|i| format!("{prefix}_{i}")));
+        } else {
+            out.push(item.to_string());
+        }
+    }
+    for r in &out {
+        if !msgs::rosargs::valid_token(r) {
+            return Err(bad(format!("`{r}` is not a valid robot id")));
+        }
+    }
+    let mut seen = std::collections::HashSet::new();
+    if let Some(d) = out.iter().find(|r| !seen.insert(r.as_str())) {
+        return Err(bad(format!("robot `{d}` listed twice")));
+    }
+    Ok(out)
 }
 
 #[cfg(test)]
@@ -278,6 +327,23 @@ mod tests {
         let p = parse_ok(&[]);
         assert_eq!(p, Params::default());
         assert_eq!(p.fully_qualified_name(), "/robot_node");
+    }
+
+    #[test]
+    fn robots_list_and_range() {
+        assert!(parse_ok(&[]).robots.is_empty());
+        let p = parse_ok(&["--ros-args", "-p", "robots:=robot_0,robot_3"]);
+        assert_eq!(p.robots, ["robot_0", "robot_3"]);
+        let p = parse_ok(&["--ros-args", "-p", "robots:=robot_0..2,robot_7"]);
+        assert_eq!(p.robots, ["robot_0", "robot_1", "robot_2", "robot_7"]);
+        for bad in [
+            "robots:=robot_0,robot_0",
+            "robots:=robot_3..1",
+            "robots:=a-b",
+            "robots:=3",
+        ] {
+            assert!(parse(["--ros-args", "-p", bad], None).is_err(), "{bad}");
+        }
     }
 
     #[test]

@@ -100,8 +100,12 @@ fn subscribe<M: RosMessage>(
         .map_err(dds_err("create subscription"))
 }
 
-/// Run the node until `stop` is set. Returns the final counters.
+/// Run the node until `stop` is set. Returns the final counters (summed over robots in
+/// multi-robot mode).
 pub fn run(p: &Params, stop: &AtomicBool) -> anyhow::Result<Counters> {
+    if !p.robots.is_empty() {
+        return run_many(p, stop);
+    }
     let (controller, k_speed) = make_controller(p)?;
     let me = p.robot_id();
     if me.is_empty() {
@@ -111,6 +115,65 @@ pub fn run(p: &Params, stop: &AtomicBool) -> anyhow::Result<Counters> {
     }
     let ctx = Context::with_options(ContextOptions::new().domain_id(p.domain_id))
         .map_err(dds_err("DDS context"))?;
+    run_on(&ctx, p, stop, controller, k_speed)
+}
+
+/// Several robots in one process (`-p robots:=robot_0,robot_1,...`): one DDS context (one
+/// participant: one set of RustDDS threads and sockets) shared by one node per robot, in
+/// namespace `/<robot>`; each robot runs the single-robot event loop on its own thread.
+/// Every robot still has its own subscriptions and controller.
+fn run_many(p: &Params, stop: &AtomicBool) -> anyhow::Result<Counters> {
+    let mut per = Vec::with_capacity(p.robots.len());
+    for name in &p.robots {
+        let mut q = p.clone();
+        q.namespace = format!("/{name}");
+        q.robots = Vec::new();
+        let (controller, k_speed) = make_controller(&q).with_context(|| format!("robot {name}"))?;
+        per.push((q, controller, k_speed));
+    }
+    let ctx = Context::with_options(ContextOptions::new().domain_id(p.domain_id))
+        .map_err(dds_err("DDS context"))?;
+    info!("{} robots in one process", per.len());
+    let results: Vec<anyhow::Result<Counters>> = std::thread::scope(|s| {
+        let handles: Vec<_> = per
+            .into_iter()
+            .map(|(q, controller, k_speed)| {
+                let ctx = &ctx;
+                std::thread::Builder::new()
+                    .name(q.robot_id())
+                    .spawn_scoped(s, move || {
+                        run_on(ctx, &q, stop, controller, k_speed)
+                            .with_context(|| format!("robot {}", q.robot_id()))
+                    })
+            })
+            .collect();
+        handles
+            .into_iter()
+            .map(|h| match h {
+                Ok(h) => h
+                    .join()
+                    .unwrap_or_else(|_| Err(anyhow!("robot thread panicked"))),
+                Err(e) => Err(anyhow!("cannot start a robot thread: {e}")),
+            })
+            .collect()
+    });
+    let mut total = Counters::default();
+    for r in results {
+        total.add(&r?);
+    }
+    info!("final counters (all robots): {total}");
+    Ok(total)
+}
+
+/// One robot's node on a (possibly shared) DDS context, until `stop` is set.
+fn run_on(
+    ctx: &Context,
+    p: &Params,
+    stop: &AtomicBool,
+    controller: Box<dyn Controller>,
+    k_speed: f64,
+) -> anyhow::Result<Counters> {
+    let me = p.robot_id();
     let mut node = ctx
         .new_node(
             NodeName::new(&p.namespace, &p.node_name).map_err(dds_err("node name"))?,
@@ -119,14 +182,14 @@ pub fn run(p: &Params, stop: &AtomicBool) -> anyhow::Result<Counters> {
         .map_err(dds_err("create node"))?;
     let spinner = node.spinner().map_err(dds_err("spinner"))?;
     let spin_thread = std::thread::Builder::new()
-        .name("ros2-spinner".into())
+        .name(format!("spin-{me}"))
         .spawn(move || {
             if let Err(e) = smol::block_on(spinner.spin()) {
                 warn!("spinner stopped with error: {e:?}");
             }
         })?;
 
-    let result = event_loop(p, stop, &ctx, &mut node, controller, k_speed, &me);
+    let result = event_loop(p, stop, ctx, &mut node, controller, k_speed, &me);
     drop(node); // signals the spinner to stop
     if spin_thread.join().is_err() {
         warn!("spinner thread panicked");
@@ -452,7 +515,7 @@ fn event_loop(
             next_stats += stats_period;
             let (m, s, r) = brain.world.known();
             info!(
-                "counters: {} | known machines={m} storages={s} peers={r}",
+                "counters {me}: {} | known machines={m} storages={s} peers={r}",
                 brain.counters
             );
             if p.stats_json {
@@ -464,7 +527,7 @@ fn event_loop(
     // ---- shutdown: stop the robot
     publish(&mut brain, [0.0, 0.0], None);
     rosout!(log, LogLevel::Info, "stopping: published zero cmd_vel");
-    info!("final counters: {}", brain.counters);
+    info!("final counters {me}: {}", brain.counters);
     if p.stats_json {
         print_stats_json(me, &brain.counters, t0, true);
     }

@@ -90,6 +90,26 @@ impl Counters {
 }
 
 impl Counters {
+    /// Add another robot's counters (multi-robot mode totals); maxima stay maxima.
+    pub fn add(&mut self, o: &Counters) {
+        self.accepted += o.accepted;
+        self.dropped_decode += o.dropped_decode;
+        self.dropped_non_finite += o.dropped_non_finite;
+        self.dropped_out_of_room += o.dropped_out_of_room;
+        self.dropped_unexpected += o.dropped_unexpected;
+        self.ticks += o.ticks;
+        self.commands += o.commands;
+        self.zero_own_stale += o.zero_own_stale;
+        self.zero_obs_invalid += o.zero_obs_invalid;
+        self.zero_controller_error += o.zero_controller_error;
+        self.zero_bad_output += o.zero_bad_output;
+        self.publish_errors += o.publish_errors;
+        self.subscriptions += o.subscriptions;
+        self.lockstep_wait_timeouts += o.lockstep_wait_timeouts;
+        self.ticks_missed += o.ticks_missed;
+        self.tick_late_max_us = self.tick_late_max_us.max(o.tick_late_max_us);
+    }
+
     /// The counters as one JSON object (machine-readable stats line).
     pub fn to_json(&self) -> serde_json::Value {
         serde_json::json!({

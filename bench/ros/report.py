@@ -1,0 +1,66 @@
+#!/usr/bin/env python3
+"""Markdown tables (median and min-max over repetitions) from bench/ros/out/*.jsonl."""
+import json, os, statistics, sys
+
+OUT = os.path.join(os.path.dirname(os.path.abspath(__file__)), "out")
+
+
+def rows(name):
+    p = os.path.join(OUT, name)
+    if not os.path.exists(p):
+        return []
+    with open(p) as f:
+        return [json.loads(l) for l in f if l.strip()]
+
+
+def ms(vals, d=0, unit=""):
+    vals = [v for v in vals if v is not None]
+    if not vals:
+        return "-"
+    m = statistics.median(vals)
+    return f"{m:.{d}f}{unit} ({min(vals):.{d}f}-{max(vals):.{d}f})"
+
+
+def latency():
+    r = rows("latency.jsonl")
+    if not r:
+        return
+    print("### robot_node state-in -> cmd_vel-out (lockstep, loopback), us: median over runs (min-max)\n")
+    print("| controller | runs | load avg (1 min) | state first write -> cmd p50 | p99 | state last write -> cmd p50 | p99 | bare DDS RTT p50 | p99 | p50 ratio state/bare | lost | robot_node CPU % of a core | RSS MB |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|---|---|")
+    for kind in sorted({x["kind"] for x in r}):
+        xs = [x for x in r if x["kind"] == kind]
+        g = lambda k, q: [x[k][q] for x in xs]
+        ratio = [x["state_first_write_to_cmd_us"]["p50"] / x["bare_round_trip_us"]["p50"] for x in xs]
+        print(f"| {kind} | {len(xs)} | {ms([x['loadavg_before'][0] for x in xs], 2)} "
+              f"| {ms(g('state_first_write_to_cmd_us', 'p50'))} | {ms(g('state_first_write_to_cmd_us', 'p99'))} "
+              f"| {ms(g('state_last_write_to_cmd_us', 'p50'))} | {ms(g('state_last_write_to_cmd_us', 'p99'))} "
+              f"| {ms(g('bare_round_trip_us', 'p50'))} | {ms(g('bare_round_trip_us', 'p99'))} | {ms(ratio, 1)} "
+              f"| {sum(x['lost_states'] for x in xs)}/{sum(x['n'] for x in xs)} "
+              f"| {ms([x['robot_node_cpu_pct_one_core'] for x in xs], 2)} | {ms([x['robot_node_rss_kb'] / 1024 for x in xs], 1)} |")
+    print()
+
+
+def fleet():
+    r = rows("fleet.jsonl")
+    if not r:
+        return
+    print("### robot_node fleets at 10 Hz (realtime sim_bridge, policy), median over runs (min-max)\n")
+    print("| robots | processes | setup | runs | load avg before | missed ticks % (all robots) | worst robot % | max tick lateness ms | CPU % per robot | CPU % all robot nodes | CPU % sim_bridge | RSS MB per process | robots reporting | zero-cmd ticks (own stale) |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|")
+    keys = sorted({(x["robots_n"], x.get("multi", False)) for x in r}, key=lambda k: (k[1], k[0]))
+    for n, multi in keys:
+        xs = [x for x in r if x["robots_n"] == n and x.get("multi", False) == multi]
+        print(f"| {n} | {'1' if multi else n} | {xs[0]['setup']} | {len(xs)} | {ms([x['loadavg_before'][0] for x in xs], 2)} "
+              f"| {ms([x['missed_pct'] for x in xs], 2)} | {ms([x['missed_pct_worst_node'] for x in xs], 2)} "
+              f"| {ms([(x['tick_late_max_us'] or 0) / 1000 for x in xs], 0)} "
+              f"| {ms([x.get('cpu_pct_per_robot_median', x.get('cpu_pct_per_node_median')) for x in xs], 1)} "
+              f"| {ms([x['cpu_pct_nodes_total'] for x in xs], 0)} | {ms([x['cpu_pct_bridge'] for x in xs], 0)} "
+              f"| {ms([(x.get('rss_kb_per_process_median') or x.get('rss_kb_per_node_median') or 0) / 1024 for x in xs], 1)} "
+              f"| {'/'.join(str(x['finals']) for x in xs)} of {n} | {ms([x['zero_own_stale'] for x in xs], 0)} |")
+    print()
+
+
+if __name__ == "__main__":
+    latency()
+    fleet()
