@@ -1,5 +1,14 @@
 //! `tending fleet`: one `sim_bridge` and one `robot_node` process per robot, live metrics,
 //! clean shutdown (SIGINT to every child, wait, then kill), non-zero exit if a child fails.
+//!
+//! While it runs, the fleet takes commands on stdin, one per line (docs/bench/live.md):
+//! `add robot [NAME]` starts one more robot_node (the bridge spawns its body on its first
+//! cmd_vel), `kill NAME` SIGKILLs a robot_node (the bridge drops the body when its cmd_vel
+//! goes stale), `stop NAME` SIGINTs it, `add machine [X Y]`, `remove machine ID`,
+//! `add storage [X Y]`, `remove storage ID` go to the bridge (its `/tending/command`
+//! language, through its stdin), `status` prints the processes and the last metrics.
+//! `--record DIR` makes the bridge record a rosbag2 MCAP bag of everything it publishes and
+//! receives.
 
 use std::io::{BufRead, BufReader};
 use std::path::{Path, PathBuf};
@@ -37,6 +46,20 @@ pub struct FleetArgs {
     /// Directory for the children's logs (default: a temporary directory).
     #[arg(long)]
     pub log_dir: Option<PathBuf>,
+    /// Bag directory: sim_bridge records every topic it publishes and every cmd_vel it
+    /// receives (rosbag2 MCAP, `-p record:=DIR`).
+    #[arg(long)]
+    pub record: Option<PathBuf>,
+    /// Staleness timeout (s) of the bridge (a body whose cmd_vel is older is removed) and of
+    /// every robot_node's inputs.
+    #[arg(long, default_value_t = 2.0)]
+    pub stale_timeout: f64,
+    /// Extra `-p NAME:=VALUE` for every robot_node (repeatable; e.g. test_delay_ms:=50).
+    #[arg(long = "robot-param")]
+    pub robot_params: Vec<String>,
+    /// Do not read commands from stdin.
+    #[arg(long)]
+    pub no_stdin: bool,
 }
 
 fn sibling(name: &str) -> Result<PathBuf> {
@@ -63,6 +86,72 @@ fn sibling(name: &str) -> Result<PathBuf> {
 struct Proc {
     name: String,
     child: Child,
+}
+
+/// A command typed while the fleet runs (see the module docs).
+#[derive(Debug, PartialEq)]
+enum LiveCmd {
+    AddRobot(Option<String>),
+    Kill(String),
+    Stop(String),
+    /// A line for the bridge's `/tending/command` language.
+    Bridge(String),
+    Status,
+}
+
+fn parse_live(line: &str) -> Result<LiveCmd, String> {
+    let w: Vec<&str> = line.split_whitespace().collect();
+    let num = |s: &str| -> Result<(), String> {
+        s.parse::<f64>()
+            .ok()
+            .filter(|x| x.is_finite())
+            .map(|_| ())
+            .ok_or_else(|| format!("bad number `{s}`"))
+    };
+    let pos = |rest: &[&str]| -> Result<String, String> {
+        match rest {
+            [] => Ok(String::new()),
+            [x, y] => {
+                num(x)?;
+                num(y)?;
+                Ok(format!(" {x} {y}"))
+            }
+            _ => Err("expected no position or `X Y`".into()),
+        }
+    };
+    let robot_name = |n: &str| -> Result<String, String> {
+        let n = n.trim_start_matches('/');
+        if !n.is_empty()
+            && !n.as_bytes()[0].is_ascii_digit()
+            && n.bytes().all(|b| b.is_ascii_alphanumeric() || b == b'_')
+            && !n.starts_with("machine_")
+            && !n.starts_with("storage_")
+        {
+            Ok(n.to_string())
+        } else {
+            Err(format!("bad robot name `{n}`"))
+        }
+    };
+    match w.as_slice() {
+        ["add", "robot"] => Ok(LiveCmd::AddRobot(None)),
+        ["add", "robot", n] => Ok(LiveCmd::AddRobot(Some(robot_name(n)?))),
+        ["kill", n] | ["remove", "robot", n] => Ok(LiveCmd::Kill(robot_name(n)?)),
+        ["stop", n] => Ok(LiveCmd::Stop(robot_name(n)?)),
+        ["add", "machine", rest @ ..] => Ok(LiveCmd::Bridge(format!("add_machine{}", pos(rest)?))),
+        ["add", "storage", rest @ ..] => Ok(LiveCmd::Bridge(format!("add_storage{}", pos(rest)?))),
+        ["remove", "machine", id] => id
+            .parse::<u32>()
+            .map(|i| LiveCmd::Bridge(format!("remove_machine {i}")))
+            .map_err(|_| format!("bad id `{id}`")),
+        ["remove", "storage", id] => id
+            .parse::<u32>()
+            .map(|i| LiveCmd::Bridge(format!("remove_storage {i}")))
+            .map_err(|_| format!("bad id `{id}`")),
+        ["status"] => Ok(LiveCmd::Status),
+        _ => Err(format!(
+            "unknown command `{line}` (add robot [NAME] | kill NAME | stop NAME | add machine [X Y] | remove machine ID | add storage [X Y] | remove storage ID | status)"
+        )),
+    }
 }
 
 fn signal(pid: u32, sig: i32) {
@@ -148,22 +237,33 @@ pub fn run(a: FleetArgs) -> Result<()> {
     use std::os::unix::process::CommandExt;
     let mut procs: Vec<Proc> = Vec::new();
     let f = |x: f32| format!("{:?}", x as f64);
-    for i in 0..setup.robots {
-        let name = format!("robot_{i}");
+    let spawn_robot = |name: &str| -> Result<Proc> {
         let mut c = Command::new(&node_bin);
         c.env("ROS_DOMAIN_ID", domain.to_string())
             .args(["--ros-args", "-r", &format!("__ns:=/{name}")])
             .args(["-p", &format!("control_rate_hz:={}", a.rate_hz)])
             .args(["-p", &format!("k_speed:={}", f(cfg.task.k_speed))])
             .args(["-p", &format!("robot_radius:={}", f(sizes.robot_radius))])
-            .args(["-p", &format!("machine_half_x:={}", f(sizes.machine_half[0]))])
-            .args(["-p", &format!("machine_half_y:={}", f(sizes.machine_half[1]))])
-            .args(["-p", &format!("storage_half_x:={}", f(sizes.storage_half[0]))])
-            .args(["-p", &format!("storage_half_y:={}", f(sizes.storage_half[1]))])
-            .args(["-p", "stale_timeout_s:=2.0"])
+            .args([
+                "-p",
+                &format!("machine_half_x:={}", f(sizes.machine_half[0])),
+            ])
+            .args([
+                "-p",
+                &format!("machine_half_y:={}", f(sizes.machine_half[1])),
+            ])
+            .args([
+                "-p",
+                &format!("storage_half_x:={}", f(sizes.storage_half[0])),
+            ])
+            .args([
+                "-p",
+                &format!("storage_half_y:={}", f(sizes.storage_half[1])),
+            ])
+            .args(["-p", &format!("stale_timeout_s:={:?}", a.stale_timeout)])
             .stdin(Stdio::null())
             .stdout(Stdio::null())
-            .stderr(log(&name)?)
+            .stderr(log(name)?)
             .process_group(0); // Ctrl-C reaches us only; we stop the children in order
         if lockstep {
             c.args(["-p", "lockstep:=true"]);
@@ -171,23 +271,38 @@ pub fn run(a: FleetArgs) -> Result<()> {
         if let Some(p) = &a.policy {
             c.args(["-p", &format!("policy:={}", p.display())]);
         }
+        for rp in &a.robot_params {
+            c.args(["-p", rp]);
+        }
         let child = c
             .spawn()
             .with_context(|| format!("starting {}", node_bin.display()))?;
-        procs.push(Proc { name, child });
+        Ok(Proc {
+            name: name.to_string(),
+            child,
+        })
+    };
+    for i in 0..setup.robots {
+        procs.push(spawn_robot(&format!("robot_{i}"))?);
     }
+    let mut next_robot = setup.robots;
     let mut b = Command::new(&bridge_bin);
     b.env("ROS_DOMAIN_ID", domain.to_string())
         .args(["--ros-args", "-p", &format!("setup:={setup}")])
         .args(["-p", &format!("seed:={}", a.seed)])
         .args(["-p", &format!("mode:={}", a.mode)])
         .args(["-p", &format!("rate_hz:={}", a.rate_hz)])
-        .stdin(Stdio::null())
+        .args(["-p", &format!("stale_timeout_s:={:?}", a.stale_timeout)])
+        .args(["-p", "stdin_commands:=true"])
+        .stdin(Stdio::piped())
         .stdout(Stdio::piped())
         .stderr(log("sim_bridge")?)
         .process_group(0);
     if let Some(c) = &a.config {
         b.args(["-p", &format!("config:={}", c.display())]);
+    }
+    if let Some(r) = &a.record {
+        b.args(["-p", &format!("record:={}", r.display())]);
     }
     if lockstep {
         let steps = (a.duration * a.rate_hz).round().max(1.0) as u64;
@@ -197,6 +312,7 @@ pub fn run(a: FleetArgs) -> Result<()> {
         .spawn()
         .with_context(|| format!("starting {}", bridge_bin.display()))?;
     let out = bridge.stdout.take().expect("piped");
+    let mut bridge_in = bridge.stdin.take().expect("piped");
     procs.push(Proc {
         name: "sim_bridge".into(),
         child: bridge,
@@ -221,6 +337,17 @@ pub fn run(a: FleetArgs) -> Result<()> {
         }
     });
 
+    let (ctx_tx, ctx_rx) = std::sync::mpsc::channel::<String>();
+    if !a.no_stdin {
+        std::thread::spawn(move || {
+            for line in std::io::stdin().lock().lines().map_while(Result::ok) {
+                if ctx_tx.send(line).is_err() {
+                    break;
+                }
+            }
+        });
+    }
+
     let t0 = Instant::now();
     // lockstep ends when the bridge reaches max_steps; allow generous wall time for it
     let wall_limit = if lockstep {
@@ -230,8 +357,99 @@ pub fn run(a: FleetArgs) -> Result<()> {
     };
     let mut last: Option<serde_json::Value> = None;
     let mut early_failure: Option<String> = None;
-    let bridge_idx = procs.len() - 1;
     loop {
+        for line in ctx_rx.try_iter() {
+            let line = line.trim();
+            if line.is_empty() {
+                continue;
+            }
+            let at = t0.elapsed().as_secs_f64();
+            match parse_live(line) {
+                Err(e) => println!("fleet: t={at:.1}s error: {e}"),
+                Ok(LiveCmd::AddRobot(name)) => {
+                    let name = name.unwrap_or_else(|| {
+                        let mut n = format!("robot_{next_robot}");
+                        while procs.iter().any(|p| p.name == n) {
+                            next_robot += 1;
+                            n = format!("robot_{next_robot}");
+                        }
+                        next_robot += 1;
+                        n
+                    });
+                    if procs.iter().any(|p| p.name == name) {
+                        println!("fleet: t={at:.1}s error: {name} is already running");
+                        continue;
+                    }
+                    match spawn_robot(&name) {
+                        Ok(p) => {
+                            println!("fleet: t={at:.1}s started {name} (pid {})", p.child.id());
+                            procs.push(p);
+                        }
+                        Err(e) => println!("fleet: t={at:.1}s error: {e:#}"),
+                    }
+                }
+                Ok(LiveCmd::Kill(name)) | Ok(LiveCmd::Stop(name)) if name == "sim_bridge" => {
+                    println!("fleet: t={at:.1}s error: the bridge is not a robot")
+                }
+                Ok(cmd @ (LiveCmd::Kill(_) | LiveCmd::Stop(_))) => {
+                    let (name, sig, what) = match &cmd {
+                        LiveCmd::Kill(n) => (n.clone(), libc::SIGKILL, "SIGKILL"),
+                        LiveCmd::Stop(n) => (n.clone(), libc::SIGINT, "SIGINT"),
+                        _ => unreachable!(),
+                    };
+                    match procs.iter().position(|p| p.name == name) {
+                        None => println!("fleet: t={at:.1}s error: no running robot `{name}`"),
+                        Some(i) => {
+                            let mut p = procs.remove(i);
+                            signal(p.child.id(), sig);
+                            let st = if sig == libc::SIGKILL {
+                                p.child.wait().ok()
+                            } else {
+                                let until = Instant::now() + Duration::from_secs(5);
+                                loop {
+                                    match p.child.try_wait() {
+                                        Ok(Some(s)) => break Some(s),
+                                        Ok(None) if Instant::now() < until => {
+                                            std::thread::sleep(Duration::from_millis(20))
+                                        }
+                                        _ => {
+                                            let _ = p.child.kill();
+                                            break p.child.wait().ok();
+                                        }
+                                    }
+                                }
+                            };
+                            println!(
+                                "fleet: t={at:.1}s {what} {name} (pid {}): {}",
+                                p.child.id(),
+                                st.map(|s| s.to_string()).unwrap_or("?".into())
+                            );
+                        }
+                    }
+                }
+                Ok(LiveCmd::Bridge(l)) => {
+                    use std::io::Write;
+                    match writeln!(bridge_in, "{l}").and_then(|_| bridge_in.flush()) {
+                        Ok(()) => println!("fleet: t={at:.1}s sent `{l}` to sim_bridge"),
+                        Err(e) => println!("fleet: t={at:.1}s error: sim_bridge stdin: {e}"),
+                    }
+                }
+                Ok(LiveCmd::Status) => {
+                    let names: Vec<String> = procs
+                        .iter()
+                        .map(|p| format!("{}({})", p.name, p.child.id()))
+                        .collect();
+                    println!(
+                        "fleet: t={at:.1}s status: {} processes: {}",
+                        names.len(),
+                        names.join(" ")
+                    );
+                    if let Some(v) = &last {
+                        println!("fleet: last metrics {v}");
+                    }
+                }
+            }
+        }
         if stop.load(Ordering::SeqCst) {
             eprintln!("fleet: interrupted, stopping");
             break;
@@ -257,7 +475,9 @@ pub fn run(a: FleetArgs) -> Result<()> {
             }
             Err(std::sync::mpsc::RecvTimeoutError::Disconnected) => {
                 // bridge closed stdout: it finished (lockstep max_steps) or died
-                let _ = procs[bridge_idx].child.wait();
+                if let Some(i) = procs.iter().position(|p| p.name == "sim_bridge") {
+                    let _ = procs[i].child.wait();
+                }
                 break;
             }
             Err(_) => {}
@@ -275,6 +495,12 @@ pub fn run(a: FleetArgs) -> Result<()> {
         }
     }
     let failed = shutdown(&mut procs, Duration::from_secs(5));
+    // the bridge prints one last metrics line on exit: that is the run's final state
+    while let Ok(line) = rx.recv_timeout(Duration::from_millis(500)) {
+        if let Ok(v) = serde_json::from_str::<serde_json::Value>(&line) {
+            last = Some(v);
+        }
+    }
     if let Some(v) = &last {
         println!("final: {v}");
     }
@@ -299,4 +525,57 @@ fn policy_check(p: &Path) -> Result<()> {
         bail!("policy checkpoint {} does not exist", p.display());
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn live_commands_parse() {
+        assert_eq!(parse_live("add robot"), Ok(LiveCmd::AddRobot(None)));
+        assert_eq!(
+            parse_live("add robot rover_1"),
+            Ok(LiveCmd::AddRobot(Some("rover_1".into())))
+        );
+        assert_eq!(
+            parse_live("kill /robot_3"),
+            Ok(LiveCmd::Kill("robot_3".into()))
+        );
+        assert_eq!(
+            parse_live("stop robot_3"),
+            Ok(LiveCmd::Stop("robot_3".into()))
+        );
+        assert_eq!(
+            parse_live("add machine"),
+            Ok(LiveCmd::Bridge("add_machine".into()))
+        );
+        assert_eq!(
+            parse_live("add machine 0.5 -0.25"),
+            Ok(LiveCmd::Bridge("add_machine 0.5 -0.25".into()))
+        );
+        assert_eq!(
+            parse_live("remove machine 2"),
+            Ok(LiveCmd::Bridge("remove_machine 2".into()))
+        );
+        assert_eq!(
+            parse_live("add storage"),
+            Ok(LiveCmd::Bridge("add_storage".into()))
+        );
+        assert_eq!(
+            parse_live("remove storage 1"),
+            Ok(LiveCmd::Bridge("remove_storage 1".into()))
+        );
+        assert_eq!(parse_live("status"), Ok(LiveCmd::Status));
+        for bad in [
+            "add machine 1",
+            "add machine nan 0",
+            "remove machine x",
+            "kill 3robot",
+            "kill machine_0",
+            "fly",
+        ] {
+            assert!(parse_live(bad).is_err(), "{bad}");
+        }
+    }
 }

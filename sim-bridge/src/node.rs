@@ -65,6 +65,47 @@ struct EntityWriters {
 
 const COMMAND_TOKEN: Token = Token(usize::MAX - 1);
 
+fn wall_ns() -> u64 {
+    std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map(|d| d.as_nanos() as u64)
+        .unwrap_or(0)
+}
+
+/// `-p record:=DIR`: every message the bridge publishes and every cmd_vel and command it
+/// receives, into a rosbag2 MCAP bag (log time = wall clock, like `tending record`).
+struct Recorder {
+    w: bag::BagWriter,
+    errors: u64,
+}
+
+impl Recorder {
+    fn put<M: RosMessage>(&mut self, topic: &str, msg: &M) {
+        if let Err(e) = self.w.write_contract(topic, wall_ns(), msg) {
+            self.errors += 1;
+            if self.errors <= 5 || self.errors.is_power_of_two() {
+                warn!("recording {topic} failed ({} errors): {e:#}", self.errors);
+            }
+        }
+    }
+}
+
+/// Commands typed on stdin (`-p stdin_commands:=true`), one per line.
+fn stdin_lines() -> std::sync::mpsc::Receiver<String> {
+    let (tx, rx) = std::sync::mpsc::channel();
+    let _ = std::thread::Builder::new()
+        .name("stdin-commands".into())
+        .spawn(move || {
+            use std::io::BufRead;
+            for line in std::io::stdin().lock().lines().map_while(Result::ok) {
+                if tx.send(line).is_err() {
+                    break;
+                }
+            }
+        });
+    rx
+}
+
 /// Run until `stop` is set or `max_steps` is reached; returns the last metrics.
 pub fn run(p: BridgeParams, stop: &AtomicBool) -> anyhow::Result<MetricsLine> {
     let t0 = Instant::now();
@@ -113,6 +154,17 @@ fn event_loop(
     poll.registry()
         .register(&mut command_sub, COMMAND_TOKEN, Interest::READABLE)?;
 
+    let mut rec: Option<Recorder> = match &p.record {
+        Some(dir) => {
+            let w = bag::BagWriter::create(dir)
+                .with_context(|| format!("creating the bag {}", dir.display()))?;
+            info!("recording into {}", dir.display());
+            Some(Recorder { w, errors: 0 })
+        }
+        None => None,
+    };
+    let stdin_rx = p.stdin_commands.then(stdin_lines);
+
     let mut cmd_subs: Vec<(String, Subscription<Twist>)> = Vec::new();
     let mut robots_w: BTreeMap<String, EntityWriters> = BTreeMap::new();
     let mut machines_w: HashMap<u32, EntityWriters> = HashMap::new();
@@ -148,6 +200,7 @@ fn event_loop(
                          robots_w: &mut BTreeMap<String, EntityWriters>,
                          machines_w: &mut HashMap<u32, EntityWriters>,
                          storages_w: &mut HashMap<u32, EntityWriters>,
+                         rec: &mut Option<Recorder>,
                          send: bool|
      -> anyhow::Result<()> {
         let stamp = core.stamp();
@@ -186,7 +239,15 @@ fn event_loop(
             if let Some(f) = &w.flag {
                 let _ = f.write(Bool { data: *has_part }, Some(ns));
             }
-            let _ = w.pose.write(pose(*pos), Some(ns));
+            let ps = pose(*pos);
+            if let Some(r) = rec.as_mut() {
+                r.put(
+                    &robot(name, Leaf::HasPart).ros_name(),
+                    &Bool { data: *has_part },
+                );
+                r.put(&robot(name, Leaf::Pose).ros_name(), &ps);
+            }
+            let _ = w.pose.write(ps, Some(ns));
         }
         let ms: Vec<_> = core.env.machines().collect();
         machines_w.retain(|j, _| ms.iter().any(|m| m.id.0 == *j));
@@ -220,7 +281,15 @@ fn event_loop(
             if let Some(f) = &w.flag {
                 let _ = f.write(Bool { data: m.part_ready }, Some(ns));
             }
-            let _ = w.pose.write(pose(m.centre), Some(ns));
+            let ps = pose(m.centre);
+            if let Some(r) = rec.as_mut() {
+                r.put(
+                    &machine(j, Leaf::PartReady).ros_name(),
+                    &Bool { data: m.part_ready },
+                );
+                r.put(&machine(j, Leaf::Pose).ros_name(), &ps);
+            }
+            let _ = w.pose.write(ps, Some(ns));
         }
         let ss: Vec<_> = core.env.storages().collect();
         storages_w.retain(|k, _| ss.iter().any(|s| s.id.0 == *k));
@@ -240,15 +309,27 @@ fn event_loop(
                 storages_w.insert(k, w);
             }
             if send {
-                let _ = storages_w[&k].pose.write(pose(s.centre), Some(ns));
+                let ps = pose(s.centre);
+                if let Some(r) = rec.as_mut() {
+                    r.put(&storage(k, Leaf::Pose).ros_name(), &ps);
+                }
+                let _ = storages_w[&k].pose.write(ps, Some(ns));
             }
         }
         if !send {
             return Ok(());
         }
-        let _ = markers_pub.publish(core.markers());
-        let _ = metrics_pub.publish(core.diagnostics());
-        let _ = clock_pub.publish(Clock { clock: stamp });
+        let markers = core.markers();
+        let diag = core.diagnostics();
+        let clock = Clock { clock: stamp };
+        if let Some(r) = rec.as_mut() {
+            r.put(topics::MARKERS, &markers);
+            r.put(topics::METRICS, &diag);
+            r.put(topics::CLOCK, &clock);
+        }
+        let _ = markers_pub.publish(markers);
+        let _ = metrics_pub.publish(diag);
+        let _ = clock_pub.publish(clock);
         Ok(())
     };
 
@@ -288,6 +369,7 @@ fn event_loop(
         &mut robots_w,
         &mut machines_w,
         &mut storages_w,
+        &mut rec,
         p.mode == Mode::Realtime,
     )?;
 
@@ -311,6 +393,9 @@ fn event_loop(
             for _ in 0..1000 {
                 match sub.take() {
                     Ok(Some((tw, info))) => {
+                        if let Some(r) = rec.as_mut() {
+                            r.put(&robot(name, Leaf::CmdVel).ros_name(), &tw);
+                        }
                         let o = core.on_cmd(name, &tw, stamp_key_info(&info), t);
                         if let crate::core::CmdOutcome::Spawned(id) = o {
                             info!("spawned a body (id {}) for /{name}", id.0);
@@ -321,10 +406,20 @@ fn event_loop(
                 }
             }
         }
+        let mut lines: Vec<String> = Vec::new();
         while let Ok(Some((line, _))) = command_sub.take() {
-            match core.apply_command(&line.data, t) {
-                Ok(s) => info!("command `{}`: {s}", line.data),
-                Err(e) => warn!("command `{}` refused: {e}", line.data),
+            lines.push(line.data);
+        }
+        if let Some(rx) = &stdin_rx {
+            lines.extend(rx.try_iter().map(|l| l.trim().to_string()));
+        }
+        for line in lines.into_iter().filter(|l| !l.is_empty()) {
+            if let Some(r) = rec.as_mut() {
+                r.put(topics::COMMAND, &StdString { data: line.clone() });
+            }
+            match core.apply_command(&line, t) {
+                Ok(s) => info!("command `{line}`: {s}"),
+                Err(e) => warn!("command `{line}` refused: {e}"),
             }
         }
 
@@ -383,6 +478,7 @@ fn event_loop(
                         &mut robots_w,
                         &mut machines_w,
                         &mut storages_w,
+                        &mut rec,
                         true,
                     )?;
                 }
@@ -403,6 +499,7 @@ fn event_loop(
                             &mut robots_w,
                             &mut machines_w,
                             &mut storages_w,
+                            &mut rec,
                             true,
                         )?;
                         core.mark_published(t);
@@ -420,6 +517,7 @@ fn event_loop(
                             &mut robots_w,
                             &mut machines_w,
                             &mut storages_w,
+                            &mut rec,
                             true,
                         )?;
                         core.mark_published(t);
@@ -435,8 +533,26 @@ fn event_loop(
             next_metrics += metrics_period;
             print_metrics(&core.metrics());
         }
+        if let Some(r) = rec.as_mut() {
+            if let Err(e) = r.w.flush_due() {
+                r.errors += 1;
+                warn!("bag flush failed: {e:#}");
+            }
+        }
     }
     let m = core.metrics();
+    if let Some(r) = rec.take() {
+        let dir = r.w.dir().to_path_buf();
+        match r.w.finish() {
+            Ok(meta) => info!(
+                "bag {} finished: {} messages, {} recording errors",
+                dir.display(),
+                meta.message_count,
+                r.errors
+            ),
+            Err(e) => warn!("finishing the bag {} failed: {e:#}", dir.display()),
+        }
+    }
     print_metrics(&m);
     Ok(m)
 }

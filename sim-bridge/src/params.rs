@@ -11,7 +11,9 @@ pub const USAGE: &str = "usage: sim_bridge [--ros-args [-p NAME:=VALUE]... [--pa
 parameters: setup (6.4_2), seed (0), mode (realtime|lockstep), rate_hz (10), stale_timeout_s (2.0),
             config (scenario TOML; default: built-in), spawn_initial (true), max_steps (0 = run until stopped),
             lockstep_timeout_s (2.0), startup_grace_s (10.0), settle_s (2.0), metrics_period_s (1.0),
-            discovery_period_s (0.5)
+            discovery_period_s (0.5), record (bag directory: record every published topic and every
+            received cmd_vel as a rosbag2 MCAP bag; default: none), stdin_commands (false: also read
+            /tending/command lines from stdin)
 topics: /clock, /<robot>/pose, /<robot>/has_part, /machine_<j>/pose, /machine_<j>/part_ready,
         /storage_<k>/pose, /tending/markers, /tending/metrics; subscribes /<robot>/cmd_vel (discovered)
         and /tending/command (std_msgs/String: add_machine [x y] | remove_machine ID | add_storage [x y] |
@@ -52,6 +54,10 @@ pub struct BridgeParams {
     pub settle_s: f64,
     pub metrics_period_s: f64,
     pub discovery_period_s: f64,
+    /// Record everything published and every cmd_vel received into this bag directory.
+    pub record: Option<PathBuf>,
+    /// Read `/tending/command` lines from stdin too (what `tending fleet` uses).
+    pub stdin_commands: bool,
 }
 
 impl Default for BridgeParams {
@@ -75,6 +81,8 @@ impl Default for BridgeParams {
             settle_s: 2.0,
             metrics_period_s: 1.0,
             discovery_period_s: 0.5,
+            record: None,
+            stdin_commands: false,
         }
     }
 }
@@ -166,6 +174,15 @@ where
                 ParamValue::Str(s) if s.is_empty() => p.config = None,
                 ParamValue::Str(s) => p.config = Some(PathBuf::from(s)),
                 other => return Err(bad(n, format!("expected a path, got {other:?}"))),
+            },
+            "record" => match &v {
+                ParamValue::Str(s) if s.is_empty() => p.record = None,
+                ParamValue::Str(s) => p.record = Some(PathBuf::from(s)),
+                other => return Err(bad(n, format!("expected a directory, got {other:?}"))),
+            },
+            "stdin_commands" => match v {
+                ParamValue::Bool(b) => p.stdin_commands = b,
+                other => return Err(bad(n, format!("expected true or false, got {other:?}"))),
             },
             "spawn_initial" => match v {
                 ParamValue::Bool(b) => p.spawn_initial = b,

@@ -85,3 +85,64 @@ fn lockstep_fleet_ends_at_the_requested_sim_time() {
     assert_eq!(m["step"], 50, "{m}");
     assert_eq!(m["lockstep_timeouts"], 0, "{m}");
 }
+
+/// `tending fleet --record DIR`: the bridge's bag holds the run; `tending bag metrics`
+/// recomputes from it the parts the bridge reported in its final metrics line.
+#[test]
+fn recorded_fleet_bag_matches_the_final_metrics() {
+    let domain = (std::process::id() % 50) as u16 + 50;
+    let dir = std::env::temp_dir().join(format!("tending-rec-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    let out = Command::new(tending())
+        .args([
+            "fleet",
+            "--setup",
+            "4.4_2",
+            "--duration",
+            "10",
+            "--no-stdin",
+        ])
+        .args(["--domain", &domain.to_string()])
+        .arg("--record")
+        .arg(&dir)
+        .output()
+        .unwrap();
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success(),
+        "fleet failed: {}\n{stdout}\n{}",
+        out.status,
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let m = final_metrics(&stdout);
+    let parts = m["parts_delivered"].as_u64().unwrap();
+    assert!(parts > 0, "{m}");
+    let bm = Command::new(tending())
+        .args(["bag", "metrics"])
+        .arg(&dir)
+        .output()
+        .unwrap();
+    let text = String::from_utf8_lossy(&bm.stdout);
+    assert!(bm.status.success(), "bag metrics failed:\n{text}");
+    assert!(!text.contains("not complete"), "{text}");
+    let grab = |prefix: &str| -> u64 {
+        let l = text
+            .lines()
+            .find_map(|l| l.strip_prefix(prefix))
+            .unwrap_or_else(|| panic!("no `{prefix}` in:\n{text}"));
+        l.split_whitespace().next().unwrap().parse().unwrap()
+    };
+    assert_eq!(grab("total from /tending/metrics: "), parts, "{text}\n{m}");
+    assert_eq!(grab("total from has_part: "), parts, "{text}\n{m}");
+    // every robot's cmd_vel was recorded as received
+    let r = bag::BagReader::open(&dir).unwrap();
+    assert!(r.complete, "bag not finalized");
+    for i in 0..4 {
+        let n = r
+            .decode_topic::<msgs::Twist>(&format!("/robot_{i}/cmd_vel"))
+            .unwrap()
+            .len();
+        assert!(n >= 50, "robot_{i}: {n} cmd_vel recorded");
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}
