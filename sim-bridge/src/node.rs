@@ -164,6 +164,10 @@ fn event_loop(
         None => None,
     };
     let stdin_rx = p.stdin_commands.then(stdin_lines);
+    // test_cmd_delay_ms: received commands waiting to reach the core
+    let cmd_delay = Duration::from_secs_f64(p.test_cmd_delay_ms / 1000.0);
+    let mut delayed: std::collections::VecDeque<(Instant, String, Twist, Option<i64>)> =
+        std::collections::VecDeque::new();
 
     let mut cmd_subs: Vec<(String, Subscription<Twist>)> = Vec::new();
     let mut robots_w: BTreeMap<String, EntityWriters> = BTreeMap::new();
@@ -381,6 +385,9 @@ fn event_loop(
         if p.mode == Mode::Realtime {
             deadline = deadline.min(next_tick);
         }
+        if let Some((due, ..)) = delayed.front() {
+            deadline = deadline.min(*due);
+        }
         if let Err(e) = poll.poll(&mut events, Some(deadline.saturating_duration_since(now))) {
             if e.kind() != std::io::ErrorKind::Interrupted {
                 return Err(e).context("mio poll");
@@ -396,6 +403,15 @@ fn event_loop(
                         if let Some(r) = rec.as_mut() {
                             r.put(&robot(name, Leaf::CmdVel).ros_name(), &tw);
                         }
+                        if !cmd_delay.is_zero() {
+                            delayed.push_back((
+                                Instant::now() + cmd_delay,
+                                name.clone(),
+                                tw,
+                                stamp_key_info(&info),
+                            ));
+                            continue;
+                        }
                         let o = core.on_cmd(name, &tw, stamp_key_info(&info), t);
                         if let crate::core::CmdOutcome::Spawned(id) = o {
                             info!("spawned a body (id {}) for /{name}", id.0);
@@ -404,6 +420,12 @@ fn event_loop(
                     Ok(None) => break,
                     Err(_) => core.on_undecodable_cmd(),
                 }
+            }
+        }
+        while delayed.front().is_some_and(|d| d.0 <= Instant::now()) {
+            let (_, name, tw, stamp) = delayed.pop_front().expect("front exists");
+            if let crate::core::CmdOutcome::Spawned(id) = core.on_cmd(&name, &tw, stamp, t) {
+                info!("spawned a body (id {}) for /{name}", id.0);
             }
         }
         let mut lines: Vec<String> = Vec::new();

@@ -13,7 +13,8 @@ parameters: setup (6.4_2), seed (0), mode (realtime|lockstep), rate_hz (10), sta
             lockstep_timeout_s (2.0), startup_grace_s (10.0), settle_s (2.0), metrics_period_s (1.0),
             discovery_period_s (0.5), record (bag directory: record every published topic and every
             received cmd_vel as a rosbag2 MCAP bag; default: none), stdin_commands (false: also read
-            /tending/command lines from stdin)
+            /tending/command lines from stdin), test_cmd_delay_ms (0: fault injection, hold every
+            received cmd_vel this long before the simulator sees it)
 topics: /clock, /<robot>/pose, /<robot>/has_part, /machine_<j>/pose, /machine_<j>/part_ready,
         /storage_<k>/pose, /tending/markers, /tending/metrics; subscribes /<robot>/cmd_vel (discovered)
         and /tending/command (std_msgs/String: add_machine [x y] | remove_machine ID | add_storage [x y] |
@@ -58,6 +59,9 @@ pub struct BridgeParams {
     pub record: Option<PathBuf>,
     /// Read `/tending/command` lines from stdin too (what `tending fleet` uses).
     pub stdin_commands: bool,
+    /// Fault injection (tests and bench/faults only): every received cmd_vel reaches the
+    /// simulator this many milliseconds late.
+    pub test_cmd_delay_ms: f64,
 }
 
 impl Default for BridgeParams {
@@ -83,6 +87,7 @@ impl Default for BridgeParams {
             discovery_period_s: 0.5,
             record: None,
             stdin_commands: false,
+            test_cmd_delay_ms: 0.0,
         }
     }
 }
@@ -180,6 +185,13 @@ where
                 ParamValue::Str(s) => p.record = Some(PathBuf::from(s)),
                 other => return Err(bad(n, format!("expected a directory, got {other:?}"))),
             },
+            "test_cmd_delay_ms" => {
+                let x = num(n, &v)?;
+                if !(x.is_finite() && (0.0..=10_000.0).contains(&x)) {
+                    return Err(bad(n, format!("must be in [0, 10000] ms, got {x}")));
+                }
+                p.test_cmd_delay_ms = x;
+            }
             "stdin_commands" => match v {
                 ParamValue::Bool(b) => p.stdin_commands = b,
                 other => return Err(bad(n, format!("expected true or false, got {other:?}"))),
