@@ -18,7 +18,7 @@ use std::path::PathBuf;
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
 
-use msgs::{Bool, DiagnosticArray, PoseStamped, Twist};
+use msgs::{Bool, DiagnosticArray, PoseStamped};
 
 const STALE_S: f64 = 2.0;
 
