@@ -10,7 +10,8 @@ rep="$out/report.jsonl"; : > "$rep"
 export TENDING_FAULTS_REPORT="$PWD/$rep"
 export TENDING_NETNS_CASES="${TENDING_NETNS_CASES:-clean,loss10,loss30,delay50,delay200}"
 export TENDING_NETNS_S="${TENDING_NETNS_S:-30}"
-cargo build --release -j 2 --bin tending -p sim-bridge -p robot-node
+cargo build --release -j 2 -p tending --bin tending
+cargo build --release -j 2 -p sim-bridge -p robot-node
 for t in faults_bridge_restart faults_hostile faults_netns; do
     cargo test --release -j 2 -p sim-bridge --test "$t" -- --nocapture 2>&1 | tee "$out/$t.log" | grep -E "REPORT|test result" || true
 done

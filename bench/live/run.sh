@@ -7,7 +7,8 @@ set -euo pipefail
 cd "$(dirname "$0")/../.."
 out="bench/live/out"; mkdir -p "$out"
 P="${PHASE_S:-40}"
-cargo build --release -j 2 --bin tending -p sim-bridge -p robot-node
+cargo build --release -j 2 -p tending --bin tending
+cargo build --release -j 2 -p sim-bridge -p robot-node
 TENDING_LIVE_PHASE_S="$P" TENDING_LIVE_REPORT="$PWD/$out/live.json" \
     cargo test --release -j 2 -p sim-bridge --test live_fleet -- --nocapture 2>&1 | tee "$out/live.log" | grep -E "phase|test result" || true
 pol=()
