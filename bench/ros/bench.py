@@ -50,7 +50,7 @@ def append(name, obj):
 
 def latency(a):
     ctrls = [("greedy", "")]
-    if a.policy:
+    if a.policy and not a.greedy_only:
         ctrls.append(("policy", a.policy))
     for rep in range(a.reps):
         for name, pol in ctrls:
@@ -59,6 +59,7 @@ def latency(a):
                    "--n", str(a.n), "--interval-ms", str(a.interval_ms), "--domain", str(150 + rep * 4 + len(name) % 4)]
             if pol:
                 cmd += ["--policy", pol]
+            cmd += ["--peers", str(a.peers), "--machines", str(a.machines), "--storages", str(a.storages)]
             r = subprocess.run(cmd, capture_output=True, text=True, timeout=a.n * a.interval_ms / 1000 * 2 + 90)
             line = [l for l in r.stdout.splitlines() if l.startswith("{")]
             if r.returncode != 0 or not line:
@@ -72,6 +73,9 @@ def latency(a):
                   f"p99 {v['state_first_write_to_cmd_us']['p99']:.0f} us | bare RTT p50 {v['bare_round_trip_us']['p50']:.0f} us "
                   f"p99 {v['bare_round_trip_us']['p99']:.0f} us | load {la0[0]:.2f}", flush=True)
 
+
+STATS_PERIOD = 5  # periodic stats lines: missed ticks after the start-up phase
+STEADY_AFTER = 10  # s of robot uptime: the "steady" counts start at the first stats line past this
 
 SETUPS = {5: "5.4_2", 6: "6.4_2", 10: "10.6_4", 20: "20.12_4", 50: "50.16_4", 100: "100.16_2"}
 
@@ -92,7 +96,7 @@ def fleet_run(n, secs, warm, policy, domain, tag, multi=False):
         else:
             args += ["-r", g[0]]
         args += ["-p", "control_rate_hz:=10", "-p", "stale_timeout_s:=2.0", "-p", "stats_json:=true",
-                 "-p", "stats_period_s:=3600"]
+                 "-p", f"stats_period_s:={STATS_PERIOD}"]
         if policy:
             args += ["-p", f"policy:={policy}"]
         out = open(os.path.join(logdir, f"node_{gi}.jsonl"), "w")
@@ -137,6 +141,7 @@ def fleet_run(n, secs, warm, policy, domain, tag, multi=False):
         return None if a is None or b is None else (b - a) / TCK / dt * 100.0
 
     fin = []
+    base = {}  # robot -> first periodic line past STEADY_AFTER
     for gi in range(len(nodes)):
         with open(os.path.join(logdir, f"node_{gi}.jsonl")) as f:
             for line in f:
@@ -146,6 +151,13 @@ def fleet_run(n, secs, warm, policy, domain, tag, multi=False):
                     continue
                 if v.get("final"):
                     fin.append(v)
+                elif v.get("uptime_s", 0) >= STEADY_AFTER and v["robot"] not in base:
+                    base[v["robot"]] = v
+    steady = [(r["ticks"] - base[r["robot"]]["ticks"], r["ticks_missed"] - base[r["robot"]]["ticks_missed"])
+              for r in fin if r["robot"] in base]
+    s_ticks = sum(t for t, _ in steady)
+    s_missed = sum(m for _, m in steady)
+    s_worst = max((m / max(1, t + m) * 100 for t, m in steady), default=None)
     metrics = None
     with open(os.path.join(logdir, "sim_bridge.jsonl")) as f:
         for line in f:
@@ -161,6 +173,9 @@ def fleet_run(n, secs, warm, policy, domain, tag, multi=False):
                 policy=policy, alive_at_end=alive, killed=killed,
                 finals=len(fin), ticks=ticks, ticks_missed=missed,
                 missed_pct=missed / max(1, ticks + missed) * 100, missed_pct_worst_node=max(per_node) if per_node else None,
+                steady_robots=len(steady), steady_ticks=s_ticks, steady_missed=s_missed,
+                steady_missed_pct=s_missed / max(1, s_ticks + s_missed) * 100 if steady else None,
+                steady_missed_pct_worst=s_worst,
                 tick_late_max_us=max((r["tick_late_max_us"] for r in fin), default=None),
                 commands=sum(r["commands"] for r in fin), zero_own_stale=sum(r["zero"]["own_stale"] for r in fin),
                 subscriptions_median=statistics.median([r["subscriptions"] for r in fin]) if fin else None,
@@ -180,7 +195,9 @@ def fleet(a):
             append("fleet.jsonl", v)
             f = lambda x, d=1: "-" if x is None else f"{x:.{d}f}"
             print(f"fleet {n:3} {'1 proc' if a.multi else 'procs '} rep {rep}: missed {v['ticks_missed']}/{v['ticks']} "
-                  f"({f(v['missed_pct'], 2)}%, worst robot {f(v['missed_pct_worst_node'], 2)}%) late_max {v['tick_late_max_us']} us | "
+                  f"({f(v['missed_pct'], 2)}%, worst robot {f(v['missed_pct_worst_node'], 2)}%) after {STEADY_AFTER} s: "
+                  f"{v['steady_missed']}/{v['steady_ticks']} ({f(v['steady_missed_pct'], 2)}%, worst {f(v['steady_missed_pct_worst'], 2)}%, "
+                  f"{v['steady_robots']} robots) late_max {v['tick_late_max_us']} us | "
                   f"cpu/robot {f(v['cpu_pct_per_robot_median'])}% nodes {f(v['cpu_pct_nodes_total'], 0)}% bridge "
                   f"{f(v['cpu_pct_bridge'], 0)}% | rss/proc {v['rss_kb_per_process_median']} kB | finals {v['finals']}/{n} "
                   f"subs {v['subscriptions_median']} own_stale {v['zero_own_stale']} cmds {v['commands']} | "
@@ -195,6 +212,10 @@ def main():
     l.add_argument("--n", type=int, default=200)
     l.add_argument("--interval-ms", type=int, default=100)
     l.add_argument("--policy", default="")
+    l.add_argument("--peers", type=int, default=5)
+    l.add_argument("--machines", type=int, default=4)
+    l.add_argument("--storages", type=int, default=2)
+    l.add_argument("--greedy-only", action="store_true")
     f = sub.add_parser("fleet")
     f.add_argument("--sizes", default="5,10,20")
     f.add_argument("--reps", type=int, default=3)

@@ -3,7 +3,7 @@
 # fleets of robot_node processes at 10 Hz (missed ticks, CPU, RSS), several robots in one
 # process. Loopback only (private ROS_DOMAIN_IDs 150-230), every run bounded in count and time.
 # Results: bench/ros/out/{latency,fleet}.jsonl; tables: python3 bench/ros/report.py
-#   bash bench/ros/run.sh            # everything, ~25 min on 2 cores
+#   bash bench/ros/run.sh            # everything, ~30 min on 2 cores
 #   REPS=1 SIZES=5,10 bash bench/ros/run.sh
 set -euo pipefail
 cd "$(dirname "$0")/../.."
@@ -18,8 +18,13 @@ if [ ! -f "$POLICY" ]; then
   echo "no trained checkpoint: using random-weights SMAPPO $POLICY (same compute per decision)"
 fi
 uptime
+# 1. latency, 6.4_2-sized state (own + 4 machines + 2 storages + 5 peers = 22 samples), 10 Hz
 python3 bench/ros/bench.py latency --reps "$REPS" --n 200 --interval-ms 100 --policy "$POLICY"
+# state-size scaling (greedy): 1 machine + 1 storage, no peers (6 samples); 20.12_4-sized (68 samples)
+python3 bench/ros/bench.py latency --reps "$REPS" --n 200 --interval-ms 100 --greedy-only --peers 0 --machines 1 --storages 1
+python3 bench/ros/bench.py latency --reps "$REPS" --n 200 --interval-ms 100 --greedy-only --peers 19 --machines 12 --storages 4
+# 2./3. fleets at 10 Hz: one process per robot, then all robots in one process
 python3 bench/ros/bench.py fleet --sizes "$SIZES" --reps "$REPS" --secs 30 --policy "$POLICY"
-python3 bench/ros/bench.py fleet --sizes "$MULTI" --reps 1 --secs 30 --policy "$POLICY" --multi
+python3 bench/ros/bench.py fleet --sizes "$MULTI" --reps "$REPS" --secs 30 --policy "$POLICY" --multi
 uptime
 python3 bench/ros/report.py

@@ -137,11 +137,18 @@ fn run_many(p: &Params, stop: &AtomicBool) -> anyhow::Result<Counters> {
     let results: Vec<anyhow::Result<Counters>> = std::thread::scope(|s| {
         let handles: Vec<_> = per
             .into_iter()
-            .map(|(q, controller, k_speed)| {
+            .enumerate()
+            .map(|(i, (q, controller, k_speed))| {
                 let ctx = &ctx;
                 std::thread::Builder::new()
                     .name(q.robot_id())
                     .spawn_scoped(s, move || {
+                        // staggered start: RustDDS queues entity creation on a bounded
+                        // channel, which overflows when all robots create theirs at once
+                        let until = Instant::now() + STAGGER * i as u32;
+                        while Instant::now() < until && !stop.load(Ordering::SeqCst) {
+                            std::thread::sleep(Duration::from_millis(10));
+                        }
                         run_on(ctx, &q, stop, controller, k_speed)
                             .with_context(|| format!("robot {}", q.robot_id()))
                     })
@@ -165,6 +172,33 @@ fn run_many(p: &Params, stop: &AtomicBool) -> anyhow::Result<Counters> {
     Ok(total)
 }
 
+/// Multi-robot mode: delay between the starts of two robots.
+const STAGGER: Duration = Duration::from_millis(100);
+
+/// Retry a DDS set-up step that can fail transiently (RustDDS reports a full internal
+/// channel as a poisoned entity when many entities are created at once): 40 attempts,
+/// 250 ms apart, unless stopping.
+fn retry<T>(
+    what: &str,
+    stop: &AtomicBool,
+    mut f: impl FnMut() -> anyhow::Result<T>,
+) -> anyhow::Result<T> {
+    let mut attempt = 1;
+    loop {
+        match f() {
+            Ok(x) => return Ok(x),
+            Err(e) if attempt < 40 && !stop.load(Ordering::SeqCst) => {
+                if attempt == 1 {
+                    warn!("{what}: {e:#} (retrying)");
+                }
+                attempt += 1;
+                std::thread::sleep(Duration::from_millis(250));
+            }
+            Err(e) => return Err(e),
+        }
+    }
+}
+
 /// One robot's node on a (possibly shared) DDS context, until `stop` is set.
 fn run_on(
     ctx: &Context,
@@ -174,13 +208,16 @@ fn run_on(
     k_speed: f64,
 ) -> anyhow::Result<Counters> {
     let me = p.robot_id();
-    let mut node = ctx
-        .new_node(
-            NodeName::new(&p.namespace, &p.node_name).map_err(dds_err("node name"))?,
-            NodeOptions::new().enable_rosout(p.enable_rosout),
-        )
-        .map_err(dds_err("create node"))?;
-    let spinner = node.spinner().map_err(dds_err("spinner"))?;
+    let (mut node, spinner) = retry("node", stop, || {
+        let mut node = ctx
+            .new_node(
+                NodeName::new(&p.namespace, &p.node_name).map_err(dds_err("node name"))?,
+                NodeOptions::new().enable_rosout(p.enable_rosout),
+            )
+            .map_err(dds_err("create node"))?;
+        let spinner = node.spinner().map_err(dds_err("spinner"))?;
+        Ok((node, spinner))
+    })?;
     let spin_thread = std::thread::Builder::new()
         .name(format!("spin-{me}"))
         .spawn(move || {
@@ -222,9 +259,10 @@ fn event_loop(
     // cmd_vel carries the stamp of the state it answers as its DDS source timestamp
     // (lockstep); otherwise the wall clock, like any ROS 2 publisher.
     let cmd_name = topics::robot(me, Leaf::CmdVel).ros_name();
-    let cmd_pub: StampedWriter<Twist> =
+    let cmd_pub: StampedWriter<Twist> = retry("cmd_vel writer", stop, || {
         StampedWriter::new(ctx, node, &cmd_name, Profile::RobotStream)
-            .map_err(|e| anyhow!("cmd_vel writer: {e}"))?;
+            .map_err(|e| anyhow!("cmd_vel writer: {e}"))
+    })?;
 
     let mut poll = Poll::new().context("mio poll")?;
     let mut events = Events::with_capacity(256);
@@ -264,7 +302,9 @@ fn event_loop(
     for leaf in [Leaf::Pose, Leaf::HasPart] {
         let t = topics::robot(me, leaf);
         known.insert(t.clone());
-        add_sub(node, &poll, &mut subs, t)?;
+        retry("own subscription", stop, || {
+            add_sub(node, &poll, &mut subs, t.clone())
+        })?;
     }
     let mut clock_sub: Option<Subscription<Clock>> = if p.use_sim_time {
         let mut s = subscribe::<Clock>(node, topics::CLOCK, Profile::Clock)?;
@@ -299,6 +339,7 @@ fn event_loop(
     let mut next_stats = t0 + stats_period;
     let mut last_outcome: Option<Outcome> = None;
     let mut wrong_type_warned: HashSet<String> = HashSet::new();
+    let mut sub_failed_warned: HashSet<EntityTopic> = HashSet::new();
     // sim time: last tick index = floor(t * rate), last clock value
     let mut sim_last_index: Option<i64> = None;
     let mut sim_last_t: f64 = f64::NEG_INFINITY;
@@ -370,7 +411,17 @@ fn event_loop(
                         brain.counters.subscriptions = subs.len() as u64;
                         info!("discovered {}", topic.ros_name());
                     }
-                    Err(e) => warn!("cannot subscribe to {}: {e:#}", topic.ros_name()),
+                    Err(e) => {
+                        // transient (e.g. RustDDS's entity channel full while many
+                        // entities are created at once): retried at the next scan
+                        if sub_failed_warned.insert(topic.clone()) {
+                            warn!(
+                                "cannot subscribe to {} (will retry): {e:#}",
+                                topic.ros_name()
+                            );
+                        }
+                        known.remove(&topic);
+                    }
                 }
             }
             brain.counters.subscriptions = subs.len() as u64;
