@@ -77,7 +77,7 @@ def latency(a):
 STATS_PERIOD = 5  # periodic stats lines: missed ticks after the start-up phase
 STEADY_AFTER = 10  # s of robot uptime: the "steady" counts start at the first stats line past this
 
-SETUPS = {5: "5.4_2", 6: "6.4_2", 10: "10.6_4", 20: "20.12_4", 50: "50.16_4", 100: "100.16_2"}
+SETUPS = {5: "5.4_2", 6: "6.4_2", 10: "10.6_4", 20: "20.12_4", 30: "30.18_4", 40: "40.24_4", 50: "50.16_4", 100: "100.16_2"}
 
 
 def fleet_run(n, secs, warm, policy, domain, tag, multi=False):

@@ -8,7 +8,7 @@
 set -euo pipefail
 cd "$(dirname "$0")/../.."
 REPS=${REPS:-3}
-SIZES=${SIZES:-5,10,20}
+SIZES=${SIZES:-5,10,20,30}
 MULTI=${MULTI:-20,50,100}
 cargo build --release -j 2 -p robot-node -p sim-bridge -p ros-bench
 POLICY=policy/pretrained/smappo_6.4_2.safetensors
