@@ -20,6 +20,8 @@ fi
 uptime
 # 1. latency, 6.4_2-sized state (own + 4 machines + 2 storages + 5 peers = 22 samples), 10 Hz
 python3 bench/ros/bench.py latency --reps "$REPS" --n 200 --interval-ms 100 --policy "$POLICY"
+# back to back (a state every 2 ms), for comparison with back-to-back round-trip figures
+python3 bench/ros/bench.py latency --reps "$REPS" --n 500 --interval-ms 2 --policy "$POLICY"
 # state-size scaling (greedy): 1 machine + 1 storage, no peers (6 samples); 20.12_4-sized (68 samples)
 python3 bench/ros/bench.py latency --reps "$REPS" --n 200 --interval-ms 100 --greedy-only --peers 0 --machines 1 --storages 1
 python3 bench/ros/bench.py latency --reps "$REPS" --n 200 --interval-ms 100 --greedy-only --peers 19 --machines 12 --storages 4
