@@ -30,7 +30,7 @@ pub struct FleetArgs {
     /// Policy checkpoint for every robot_node (default: the greedy controller).
     #[arg(long)]
     pub policy: Option<PathBuf>,
-    /// realtime (bridge steps at --rate-hz) or lockstep (reproducible, see docs/adr/0001-lockstep.md).
+    /// realtime (bridge steps at --rate-hz) or lockstep (reproducible, see docs/adr/0003-lockstep.md).
     #[arg(long, default_value = "realtime", value_parser = ["realtime", "lockstep"])]
     pub mode: String,
     #[arg(long, default_value_t = 0)]

@@ -2,7 +2,7 @@
 //!
 //! [`StampedWriter`]: a plain RustDDS writer on a contract topic whose samples carry an
 //! explicit DDS *source timestamp*. ros2-client's `Publisher::publish` always stamps
-//! samples with the wall clock; the lockstep protocol (docs/adr/0001-lockstep.md) needs
+//! samples with the wall clock; the lockstep protocol (docs/adr/0003-lockstep.md) needs
 //! the simulator step a sample belongs to on topics whose message has no header
 //! (`std_msgs/Bool`, `geometry_msgs/Twist`). The source timestamp is RTPS metadata, so
 //! the message types on the wire stay the standard ones and stock ROS 2 tools read them

@@ -57,7 +57,7 @@ pub struct Params {
     pub robot_radius: f64,
     pub machine_half: [f64; 2],
     pub storage_half: [f64; 2],
-    /// Lockstep with the sim bridge (docs/adr/0001-lockstep.md): act once per simulator
+    /// Lockstep with the sim bridge (docs/adr/0003-lockstep.md): act once per simulator
     /// state, when own and all expected entity data of that state's stamp are in (or
     /// after `lockstep_wait_s`), and tag cmd_vel with the state's stamp. Implies sim time.
     pub lockstep: bool,

@@ -427,7 +427,7 @@ fn event_loop(
             brain.counters.subscriptions = subs.len() as u64;
         }
 
-        // ---- lockstep: act once per simulator state (docs/adr/0001-lockstep.md)
+        // ---- lockstep: act once per simulator state (docs/adr/0003-lockstep.md)
         if p.lockstep {
             if let Some(clock) = clock_sub.as_ref() {
                 while let Ok(Some(_)) = clock.take() {} // /clock is not used in lockstep

@@ -26,7 +26,7 @@ pub enum Mode {
     /// Step at `rate_hz` on the wall clock with the latest command of each robot.
     Realtime,
     /// Step when every live robot answered the last published state (or after
-    /// `lockstep_timeout_s`): reproducible runs (docs/adr/0001-lockstep.md).
+    /// `lockstep_timeout_s`): reproducible runs (docs/adr/0003-lockstep.md).
     Lockstep,
 }
 

@@ -8,7 +8,7 @@
 //! ```
 //!
 //! `latency` plays the simulator bridge for `/robot_0` in lockstep mode
-//! (docs/adr/0001-lockstep.md): every state k is published with stamp k (pose header stamp
+//! (docs/adr/0003-lockstep.md): every state k is published with stamp k (pose header stamp
 //! and DDS source timestamp), and the robot's `cmd_vel` answering it carries k as its source
 //! timestamp, so each reply is matched to the state that caused it. Interleaved with each
 //! state, one bare DDS round trip to a separate `echo` process (same writer kind, same QoS)
