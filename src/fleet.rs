@@ -27,7 +27,8 @@ pub struct FleetArgs {
     /// Run time in seconds: wall time in realtime mode, sim time in lockstep mode.
     #[arg(long, default_value_t = 60.0)]
     pub duration: f64,
-    /// Policy checkpoint for every robot_node (default: the greedy controller).
+    /// Policy for every robot_node: a checkpoint path, `greedy` for the scripted controller,
+    /// or (default) the bundled SMAPPO policy policy/pretrained/smappo_6.4_2.safetensors.
     #[arg(long)]
     pub policy: Option<PathBuf>,
     /// realtime (bridge steps at --rate-hz) or lockstep (reproducible, see docs/adr/0003-lockstep.md).
@@ -193,7 +194,31 @@ fn shutdown(procs: &mut [Proc], grace: Duration) -> Vec<String> {
     failed
 }
 
-pub fn run(a: FleetArgs) -> Result<()> {
+/// The checkpoint shipped in the repository (the README's main job runs it).
+pub fn bundled_policy() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("policy/pretrained/smappo_6.4_2.safetensors")
+}
+
+/// `--policy` as given: `greedy` means no checkpoint; none means the bundled policy when it
+/// is present (a checkout without it falls back to greedy, and says so).
+fn resolve_policy(p: Option<PathBuf>) -> Option<PathBuf> {
+    match p {
+        Some(p) if p.as_os_str() == "greedy" => None,
+        Some(p) => Some(p),
+        None => {
+            let b = bundled_policy();
+            if b.exists() {
+                Some(b)
+            } else {
+                eprintln!("fleet: no bundled policy at {}, using greedy", b.display());
+                None
+            }
+        }
+    }
+}
+
+pub fn run(mut a: FleetArgs) -> Result<()> {
+    a.policy = resolve_policy(a.policy.take());
     let setup: sim::Setup = a.setup.parse().map_err(|e| anyhow!("--setup: {e}"))?;
     if !(a.duration.is_finite() && a.duration > 0.0) {
         bail!("--duration must be > 0");
