@@ -8,15 +8,16 @@ use serde::{Deserialize, Serialize};
 #[serde(deny_unknown_fields, default)]
 pub struct TrainConfig {
     /// Parallel environments per update (MAPPO `n_rollout_threads`, default there 32).
-    /// Here 8: every update collects exactly one 200-step episode per env, so n_envs is
+    /// Here 4: every update collects exactly one 200-step episode per env, so n_envs is
     /// the number of episodes per update; with 32, a 2,000-episode run (the paper's
-    /// budget) would make only 62 updates. 8 gives 250 updates of 9,600 agent-steps on
-    /// 6.4_2, which learns (see docs/bench/train.md) and fits the wall-time budget.
+    /// budget) would make only 62 updates, with 4 it makes 500 (4,800 agent-steps each on
+    /// 6.4_2). The cost per agent-step is about the same either way.
     pub n_envs: usize,
     /// PPO epochs over each batch (MAPPO default 15, 10 for some MPE tasks). Here 10:
-    /// measured on the 2-core machine, one 6.4_2 update (8 envs x 200 steps x 6 robots)
-    /// costs ~0.6 s rollout + ~0.45 s per epoch (actor and critic on the two cores), so 10
-    /// epochs make 2,000 episodes in about 25-35 minutes (15 would take ~45-50).
+    /// measured on the 2-core machine (docs/bench/train.md), 6.4_2 trains at ~2,500
+    /// agent-steps/s with 10 epochs (actor and critic on the two cores), so 2,000 episodes
+    /// (2.4 M agent-steps) take ~16 min on a quiet machine and ~26 min with the load of
+    /// the other engineers' jobs; 15 epochs would add half again.
     pub ppo_epoch: usize,
     /// Mini-batches per epoch (MAPPO default 1).
     pub num_mini_batch: usize,
