@@ -31,15 +31,30 @@ unsafe impl GlobalAlloc for Counting {
 static GLOBAL: Counting = Counting;
 
 fn obs_row(m: usize, k: usize, p: usize, shift: f32) -> obs::ObsBatch {
-    let mut b = obs::ObsBatch::zeros(1, obs::Counts { machines: m, storages: k, peers: p });
+    let mut b = obs::ObsBatch::zeros(
+        1,
+        obs::Counts {
+            machines: m,
+            storages: k,
+            peers: p,
+        },
+    );
     for (i, v) in b.machines.iter_mut().enumerate() {
-        *v = if i % 3 == 2 { (i % 2) as f32 } else { (i as f32 * 0.37 + shift).sin() };
+        *v = if i % 3 == 2 {
+            (i % 2) as f32
+        } else {
+            (i as f32 * 0.37 + shift).sin()
+        };
     }
     for (i, v) in b.storages.iter_mut().enumerate() {
         *v = (i as f32 * 0.11 - shift).cos();
     }
     for (i, v) in b.peers.iter_mut().enumerate() {
-        *v = if i % 3 == 2 { 0.0 } else { (i as f32 * 0.23 + shift).sin() };
+        *v = if i % 3 == 2 {
+            0.0
+        } else {
+            (i as f32 * 0.23 + shift).sin()
+        };
     }
     b.own.copy_from_slice(&[0.1 * shift, -0.2, 0.0]);
     b
@@ -51,7 +66,8 @@ fn act_does_not_allocate_after_warm_up() {
     let mut pol = policy::Policy::from_actor(actor, serde_json::json!({}));
     let mut state = pol.new_state();
     let inputs: Vec<_> = (0..8).map(|s| obs_row(10, 4, 13, s as f32)).collect();
-    pol.act(&inputs[0], &mut state, policy::ActMode::Greedy).unwrap();
+    pol.act(&inputs[0], &mut state, policy::ActMode::Greedy)
+        .unwrap();
     MEASURING.with(|m| m.set(true));
     let before = ALLOCS.load(Ordering::SeqCst);
     let mut actions = [0u8; 8];
@@ -61,5 +77,10 @@ fn act_does_not_allocate_after_warm_up() {
     let after = ALLOCS.load(Ordering::SeqCst);
     MEASURING.with(|m| m.set(false));
     assert!(actions.iter().all(|&a| a < 5));
-    assert_eq!(after - before, 0, "{} allocations in 8 decisions", after - before);
+    assert_eq!(
+        after - before,
+        0,
+        "{} allocations in 8 decisions",
+        after - before
+    );
 }
