@@ -23,9 +23,11 @@ fn main() {
         r.time = 0.0;
         r.progress = 2.0;
     }
-    let mut cfg = TrainConfig::default();
-    cfg.n_envs = 8;
-    cfg.num_mini_batch = 4;
+    let cfg = TrainConfig {
+        n_envs: 8,
+        num_mini_batch: 4,
+        ..TrainConfig::default()
+    };
     let setup: sim::Setup = std::env::args()
         .nth(2)
         .unwrap_or("1.1_1".into())
