@@ -845,13 +845,23 @@ impl Env {
                 so[j * 2 + 1] = c[1] - y;
             }
             let po = &mut peers[i * pw..(i + 1) * pw];
-            let mut o = 0;
-            for j in (0..n).filter(|&j| j != i) {
-                let q = self.r_pos[j];
-                po[o] = q[0] - x;
-                po[o + 1] = q[1] - y;
-                po[o + 2] = obs::flag(self.r_part[j]);
-                o += 3;
+            // Peers in robot order without robot i: two straight runs, no per-item branch.
+            let (before, after) = po.split_at_mut(i * 3);
+            for (o, (q, &hp)) in before
+                .chunks_exact_mut(3)
+                .zip(self.r_pos[..i].iter().zip(&self.r_part[..i]))
+            {
+                o[0] = q[0] - x;
+                o[1] = q[1] - y;
+                o[2] = obs::flag(hp);
+            }
+            for (o, (q, &hp)) in after
+                .chunks_exact_mut(3)
+                .zip(self.r_pos[i + 1..].iter().zip(&self.r_part[i + 1..]))
+            {
+                o[0] = q[0] - x;
+                o[1] = q[1] - y;
+                o[2] = obs::flag(hp);
             }
         }
     }
