@@ -39,6 +39,8 @@ if [ -z "$prefix" ]; then usage >&2; exit 2; fi
 here="$(cd "$(dirname "$0")" && pwd)"
 repo="$(cd "$here/.." && pwd)"
 bin_dir="${TENDING_BIN_DIR:-$repo/target/release}"
+# Absolute, so that --symlink links do not dangle when TENDING_BIN_DIR is relative.
+if [ -d "$bin_dir" ]; then bin_dir="$(cd "$bin_dir" && pwd)"; fi
 
 mkdir -p "$prefix"
 prefix="$(cd "$prefix" && pwd)"

@@ -26,7 +26,7 @@ if [ ! -x "$venv/bin/python" ] || [ "$(cat "$stamp" 2>/dev/null)" != "$want" ]; 
         -r tests/interop/requirements.txt
     echo "$want" > "$stamp"
 fi
-export TENDING_BIN_DIR="${TENDING_BIN_DIR:-${CARGO_TARGET_DIR:-target}/release}"
+export TENDING_BIN_DIR="${TENDING_BIN_DIR:-$(cd "${CARGO_TARGET_DIR:-target}/release" && pwd)}"
 export RMW_IMPLEMENTATION=rmw_fastrtps_cpp
 unset ROS_LOCALHOST_ONLY ROS_AUTOMATIC_DISCOVERY_RANGE ROS_STATIC_PEERS FASTRTPS_DEFAULT_PROFILES_FILE
 # -rsxR: print why anything was skipped, is a known failure (xfail) or was rerun.
