@@ -5,6 +5,15 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 export CARGO_TERM_COLOR=never
+
+# System tools the fault tests use (network namespaces, packet loss): Debian packages,
+# installed here so a fresh machine needs nothing by hand.
+if ! command -v iptables >/dev/null || ! command -v ip >/dev/null; then
+    if [ "$(id -u)" = 0 ] && command -v apt-get >/dev/null; then
+        echo "== apt-get install iptables iproute2 (fault tests)"
+        apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq iptables iproute2
+    fi
+fi
 echo "== cargo test --workspace --release"
 cargo test --workspace --release --locked -j 2 2>&1
 
