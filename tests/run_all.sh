@@ -14,6 +14,11 @@ if ! command -v iptables >/dev/null || ! command -v ip >/dev/null; then
         apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq iptables iproute2
     fi
 fi
+# Binaries first: the fault tests (sim-bridge/tests -> tests/faults) and the interop tests
+# run the `tending`, `robot_node` and `sim_bridge` binaries of other packages, which
+# `cargo test` does not build for them.
+echo "== cargo build --release --workspace --bins"
+cargo build --release --locked -j 2 --workspace --bins 2>&1
 echo "== cargo test --workspace --release"
 cargo test --workspace --release --locked -j 2 2>&1
 
@@ -21,8 +26,6 @@ cargo test --workspace --release --locked -j 2 2>&1
 # tests/interop (launch-scripts install layout + launch file, robot_node and sim_bridge
 # interop over DDS). The virtualenv lives in target/ (ignored), is created if missing and
 # reinstalled only when tests/interop/requirements.txt changes.
-echo "== cargo build --release --workspace --bins (binaries for the interop tests)"
-cargo build --release --locked -j 2 --workspace --bins 2>&1
 echo "== python interop tests (tests/interop)"
 venv="target/interop-venv"
 py_sys="$(command -v python3.11 || command -v python3)"
