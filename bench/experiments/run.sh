@@ -23,7 +23,8 @@ cd "$(dirname "$0")/../.."
 SCALE="${SCALE:-0.1}"
 SEEDS="${SEEDS:-0 1 2}"
 EVAL_EPISODES="${EVAL_EPISODES:-50}"
-T=target/release/tending
+# TENDING: the binary to use (a copy keeps a long run safe from rebuilds of target/).
+T="${TENDING:-target/release/tending}"
 [ -x "$T" ] || cargo build --release --bin tending
 eps() { python3 -c "import math,sys; print(max(8, int(math.ceil($1 * $SCALE / 8.0)) * 8))"; }
 mkdir -p runs/exp docs/experiments
