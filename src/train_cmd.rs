@@ -1,17 +1,22 @@
 //! `tending train`: PPO training of SMAPPO or MAPPO with progress, CSV log, curve and
 //! checkpoints; Ctrl-C (or SIGTERM) finishes the current update, saves and exits, and
 //! `--resume` continues bit-exactly.
+//!
+//! `--randomize 2..12.2..8_1..4` trains on setups drawn from inclusive ranges of robots,
+//! machines and storages instead of fixed setups: one draw per update (all envs of a
+//! rollout share it), seeded by (seed, update) so resume stays exact; log.csv's `setup`
+//! column holds each update's draw.
 
 use crate::plot::{plot_training, CurvePoint};
-use anyhow::{bail, Context, Result};
+use anyhow::{anyhow, bail, Context, Result};
 use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
-use policy::train::{parse_curriculum, Stage, TrainConfig, Trainer, UpdateStats};
+use policy::train::{parse_curriculum, SetupRange, Stage, TrainConfig, Trainer, UpdateStats};
 use policy::ModelKind;
 use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, Ordering};
-use std::sync::Arc;
+use std::sync::OnceLock;
 use std::time::Instant;
 
 #[derive(Args, Debug)]
@@ -20,11 +25,21 @@ pub struct TrainArgs {
     #[arg(long, default_value = "smappo")]
     pub model: String,
     /// Setup N.M_K to train on (ignored with --curriculum). Default 6.4_2.
-    #[arg(long)]
+    #[arg(long, conflicts_with = "randomize")]
     pub setup: Option<String>,
     /// Episodes to train (ignored with --curriculum). Default 2000.
     #[arg(long)]
     pub episodes: Option<u64>,
+    /// Randomized setups instead of fixed ones: N.M_K with each count a or a..b
+    /// (inclusive; a-b works too), e.g. 2..12.2..8_1..4 = 2-12 robots, 2-8 machines,
+    /// 1-4 storage areas. Each count is drawn uniformly and independently ONCE PER UPDATE
+    /// (all envs of a rollout share the draw), from a generator seeded by (--seed, update
+    /// index), so runs are reproducible and --resume exact; log.csv's `setup` column is
+    /// the draw. Refused before training when the range's largest setup does not fit the
+    /// room or (MAPPO) exceeds the mappo_max_* padding. With --episodes (default 2000);
+    /// with --resume, switches or extends the run.
+    #[arg(long, conflicts_with = "curriculum", value_name = "RANGE")]
+    pub randomize: Option<String>,
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
     /// Run directory: log.csv, curve.png, policy.safetensors, trainer_state.safetensors.
@@ -37,7 +52,7 @@ pub struct TrainArgs {
     #[arg(long)]
     pub scenario: Option<PathBuf>,
     /// Continue the run in --out from its trainer state (config, seed, schedule restored;
-    /// --setup/--episodes/--curriculum, when given, replace the schedule).
+    /// --setup/--episodes/--curriculum/--randomize, when given, replace the schedule).
     #[arg(long)]
     pub resume: bool,
     /// setup:episodes list, e.g. 6.4_2:2000,12.8_4:100,18.12_6:100
@@ -55,7 +70,22 @@ const LOG_HEADER: &str = "update,episodes,agent_steps,stage,setup,team_reward,pa
 collisions,mu,policy_loss,value_loss,entropy,approx_kl,clip_frac,actor_grad_norm,\
 critic_grad_norm,rollout_secs,train_secs,wall_secs,agent_steps_per_sec";
 
+/// `--randomize`: the range, and the episode budget when given.
+fn range_from_args(a: &TrainArgs) -> Result<Option<(SetupRange, Option<u64>)>> {
+    let Some(r) = &a.randomize else {
+        return Ok(None);
+    };
+    let range: SetupRange = r.parse().map_err(|e| anyhow!("--randomize: {e}"))?;
+    if a.episodes == Some(0) {
+        bail!("--episodes 0: nothing to train");
+    }
+    Ok(Some((range, a.episodes)))
+}
+
 fn schedule_from_args(a: &TrainArgs) -> Result<Option<Vec<Stage>>> {
+    if a.randomize.is_some() {
+        return Ok(None);
+    }
     if let Some(c) = &a.curriculum {
         return Ok(Some(parse_curriculum(c)?));
     }
@@ -154,31 +184,51 @@ fn save_all(t: &Trainer, out: &Path, lines: &[String]) -> Result<()> {
     Ok(())
 }
 
+/// Set by Ctrl-C / SIGTERM: finish the current update, save, exit. The handler is
+/// installed once per process (a second `ctrlc::set_handler` fails), so `run` can be
+/// called more than once (tests); each call clears the flag.
+static STOP: AtomicBool = AtomicBool::new(false);
+
+fn stop_flag() -> Result<&'static AtomicBool> {
+    static INSTALLED: OnceLock<Result<(), String>> = OnceLock::new();
+    INSTALLED
+        .get_or_init(|| {
+            let first = AtomicBool::new(true);
+            ctrlc::set_handler(move || {
+                if first.swap(false, Ordering::SeqCst) {
+                    eprintln!("\nstopping after the current update (Ctrl-C again to abort)...");
+                    STOP.store(true, Ordering::SeqCst);
+                } else {
+                    std::process::exit(130);
+                }
+            })
+            .map_err(|e| e.to_string())
+        })
+        .clone()
+        .map_err(|e| anyhow!("install Ctrl-C handler: {e}"))?;
+    STOP.store(false, Ordering::SeqCst);
+    Ok(&STOP)
+}
+
 pub fn run(a: TrainArgs) -> Result<()> {
     std::fs::create_dir_all(&a.out).with_context(|| format!("create {}", a.out.display()))?;
     let state_path = a.out.join("trainer_state.safetensors");
     let log_path = a.out.join("log.csv");
+    let range = range_from_args(&a)?;
     let schedule = schedule_from_args(&a)?;
     let mut t = if a.resume {
         if !state_path.exists() {
             bail!("--resume: no {} to resume from", state_path.display());
         }
         let mut t = Trainer::resume(&state_path, None).context("resume")?;
-        match (&a.curriculum, &a.setup, a.episodes) {
-            (Some(_), _, _) | (None, Some(_), _) => {
-                t.set_schedule(schedule.expect("given"))?;
-            }
-            (None, None, Some(total)) => {
-                // --episodes alone: a new total, the last stage absorbs the difference
-                let mut s = t.schedule.clone();
-                let before: u64 = s[..s.len() - 1].iter().map(|x| x.episodes).sum();
-                if total <= before {
-                    bail!("--episodes {total} ends before the last curriculum stage");
-                }
-                s.last_mut().expect("non-empty").episodes = total - before;
-                t.set_schedule(s)?;
-            }
-            (None, None, None) => {}
+        if let Some((r, eps)) = range {
+            let total = eps.unwrap_or_else(|| t.total_episodes());
+            t.set_randomize(r, total).context("--randomize")?;
+        } else if let Some(s) = schedule.filter(|_| a.curriculum.is_some() || a.setup.is_some()) {
+            t.set_schedule(s)?;
+        } else if let Some(total) = a.episodes {
+            // --episodes alone: a new total, the last stage absorbs the difference
+            t.set_total_episodes(total).context("--episodes")?;
         }
         t
     } else {
@@ -199,8 +249,13 @@ pub fn run(a: TrainArgs) -> Result<()> {
             None => TrainConfig::default(),
         };
         let scenario = crate::sim_cmd::load_config(&a.scenario)?;
-        let schedule = schedule.unwrap_or(parse_curriculum("6.4_2:2000")?);
-        Trainer::new(kind, cfg, scenario, schedule, a.seed)?
+        if let Some((r, eps)) = range {
+            Trainer::new_randomized(kind, cfg, scenario, r, eps.unwrap_or(2000), a.seed)
+                .context("--randomize")?
+        } else {
+            let schedule = schedule.unwrap_or(parse_curriculum("6.4_2:2000")?);
+            Trainer::new(kind, cfg, scenario, schedule, a.seed)?
+        }
     };
     let (mut lines, mut wall) = if a.resume {
         read_log(&log_path, t.update)?
@@ -208,20 +263,7 @@ pub fn run(a: TrainArgs) -> Result<()> {
         (vec![], 0.0)
     };
 
-    let stop = Arc::new(AtomicBool::new(false));
-    {
-        let stop = stop.clone();
-        let first = AtomicBool::new(true);
-        ctrlc::set_handler(move || {
-            if first.swap(false, Ordering::SeqCst) {
-                eprintln!("\nstopping after the current update (Ctrl-C again to abort)...");
-                stop.store(true, Ordering::SeqCst);
-            } else {
-                std::process::exit(130);
-            }
-        })
-        .context("install Ctrl-C handler")?;
-    }
+    let stop = stop_flag()?;
 
     let total = t.total_episodes();
     let pb = if a.quiet {
@@ -239,7 +281,7 @@ pub fn run(a: TrainArgs) -> Result<()> {
     eprintln!(
         "training {} on {} (seed {}, {} envs, {} epochs), {} -> {}",
         t.kind,
-        policy::train::format_curriculum(&t.schedule),
+        t.schedule_string(),
         t.seed,
         t.cfg.n_envs,
         t.cfg.ppo_epoch,
@@ -294,4 +336,135 @@ pub fn run(a: TrainArgs) -> Result<()> {
         a.out.display()
     );
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use clap::Parser;
+
+    #[derive(Parser)]
+    struct Cli {
+        #[command(flatten)]
+        a: TrainArgs,
+    }
+
+    fn args(extra: &[&str]) -> Result<TrainArgs, clap::Error> {
+        Cli::try_parse_from(["train"].iter().chain(extra)).map(|c| c.a)
+    }
+
+    /// A run directory with a 40-step scenario and a 2-env, 1-epoch training config.
+    fn run_dir(name: &str) -> (PathBuf, Vec<String>) {
+        let d = std::env::temp_dir().join(format!("tending-train-{}-{name}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&d);
+        std::fs::create_dir_all(&d).unwrap();
+        let mut sc = sim::ScenarioConfig::default();
+        sc.world.episode_steps = 40;
+        std::fs::write(d.join("scenario.toml"), sc.to_toml()).unwrap();
+        std::fs::write(d.join("train.toml"), "n_envs = 2\nppo_epoch = 1\n").unwrap();
+        let common = vec![
+            "--scenario".into(),
+            d.join("scenario.toml").display().to_string(),
+            "--config".into(),
+            d.join("train.toml").display().to_string(),
+            "--quiet".into(),
+        ];
+        (d, common)
+    }
+
+    fn train(out: &Path, common: &[String], extra: &[&str]) -> Result<()> {
+        let mut v: Vec<&str> = vec!["--out", out.to_str().unwrap()];
+        v.extend(common.iter().map(String::as_str));
+        v.extend(extra);
+        run(args(&v)?)
+    }
+
+    /// log.csv rows without the timing columns (rollout_secs onwards).
+    fn log_rows(out: &Path) -> Vec<Vec<String>> {
+        let text = std::fs::read_to_string(out.join("log.csv")).unwrap();
+        let mut lines = text.lines();
+        assert_eq!(lines.next(), Some(LOG_HEADER));
+        lines
+            .map(|l| l.split(',').take(16).map(String::from).collect())
+            .collect()
+    }
+
+    #[test]
+    fn randomize_flag_conflicts_and_help() {
+        assert!(args(&["--out", "x", "--randomize", "2..3.2_2", "--setup", "6.4_2"]).is_err());
+        assert!(args(&[
+            "--out",
+            "x",
+            "--randomize",
+            "2..3.2_2",
+            "--curriculum",
+            "6.4_2:4"
+        ])
+        .is_err());
+        let a = args(&["--out", "x", "--randomize", "2..3.2_2", "--episodes", "8"]).unwrap();
+        assert_eq!(a.randomize.as_deref(), Some("2..3.2_2"));
+        use clap::CommandFactory;
+        let help = Cli::command().render_long_help().to_string();
+        assert!(help.contains("--randomize <RANGE>"), "{help}");
+        assert!(help.contains("ONCE PER UPDATE"), "{help}");
+    }
+
+    /// Bad ranges fail before anything is trained, naming the input.
+    #[test]
+    fn randomize_bad_input_is_a_clear_error() {
+        let (d, common) = run_dir("bad");
+        for (r, why) in [
+            ("12..2.2_2", "robots range 12..2 is empty"),
+            ("2..3.2", "count fields"),
+            ("2..100000.2_2", "does not fit"),
+        ] {
+            let out = d.join("run");
+            let e = train(&out, &common, &["--randomize", r]).unwrap_err();
+            let e = format!("{e:#}");
+            assert!(
+                e.contains("--randomize") && e.contains(r) && e.contains(why),
+                "{e}"
+            );
+            assert!(!out.join("trainer_state.safetensors").exists());
+        }
+        let e = train(
+            &d.join("m"),
+            &common,
+            &["--model", "mappo", "--randomize", "2.2_1..20"],
+        )
+        .unwrap_err();
+        assert!(format!("{e:#}").contains("mappo_max_storages"), "{e:#}");
+        let _ = std::fs::remove_dir_all(&d);
+    }
+
+    /// End to end: `tending train --randomize` for 2 updates, then `--resume` for 1,
+    /// gives the log of 3 updates straight (timings aside); every logged setup lies in
+    /// the range; the checkpoints load.
+    #[test]
+    fn randomize_train_and_resume_end_to_end() {
+        let (d, common) = run_dir("e2e");
+        let range = "2..3.1..2_1..2";
+        let r: SetupRange = range.parse().unwrap();
+        let (x, y) = (d.join("straight"), d.join("resumed"));
+        let base = ["--randomize", range, "--episodes", "8", "--seed", "5"];
+        train(&x, &common, &[&base[..], &["--max-updates", "3"]].concat()).unwrap();
+        train(&y, &common, &[&base[..], &["--max-updates", "2"]].concat()).unwrap();
+        assert_eq!(log_rows(&y).len(), 2);
+        train(&y, &common, &["--resume", "--max-updates", "1"]).unwrap();
+        let (rx, ry) = (log_rows(&x), log_rows(&y));
+        assert_eq!(rx.len(), 3);
+        assert_eq!(rx, ry);
+        for row in &rx {
+            assert_eq!(row[3], "0", "one stage");
+            assert!(r.contains(row[4].parse().unwrap()), "{}", row[4]);
+        }
+        let t = Trainer::resume(&y.join("trainer_state.safetensors"), None).unwrap();
+        assert_eq!(t.schedule_string(), format!("{range}:8"));
+        assert_eq!(t.update, 3);
+        policy::Policy::load(y.join("policy.safetensors")).unwrap();
+        // a second run into the same directory needs --resume
+        let e = train(&x, &common, &base).unwrap_err();
+        assert!(e.to_string().contains("--resume"), "{e}");
+        let _ = std::fs::remove_dir_all(&d);
+    }
 }

@@ -3,17 +3,20 @@
 //!
 //! - [`TrainConfig`]: every hyper-parameter, TOML-loadable, MAPPO defaults;
 //! - [`Trainer`]: rollouts on [`sim::VecEnv`], GAE, value normalisation, recurrent PPO,
-//!   curriculum stages, checkpoints with exact resume;
+//!   curriculum stages or randomized setups ([`SetupRange`]), checkpoints with exact
+//!   resume;
 //! - [`eval`]: evaluation episodes of a learned actor or a scripted baseline.
 
 pub mod config;
 pub mod eval;
 pub mod gae;
+pub mod randomize;
 pub mod trainer;
 pub mod valuenorm;
 
 pub use config::TrainConfig;
 pub use eval::{evaluate, run_episode, Controller};
+pub use randomize::SetupRange;
 pub use trainer::{format_curriculum, parse_curriculum, Stage, TrainError, Trainer, UpdateStats};
 pub use valuenorm::ValueNorm;
 

@@ -10,9 +10,15 @@
 //! freshly reset environments, so the trainer state between updates is just the networks,
 //! Adam moments, the value normaliser and counters; [`Trainer::save_state`] stores all of
 //! them bit-exactly.
+//!
+//! Randomized setups ([`Trainer::new_randomized`]): instead of a schedule of fixed setups,
+//! every update draws its robot/machine/storage counts from a [`SetupRange`] (per update:
+//! all `n_envs` envs of the rollout share them), from a generator seeded by (seed, update)
+//! like every other stream, so the draws survive save/resume exactly.
 
 use super::config::TrainConfig;
 use super::gae::gae;
+use super::randomize::SetupRange;
 use super::valuenorm::{ValueNorm, ValueNormBits};
 use crate::checkpoint::{load_trainer_state, save_policy, save_trainer_state, CheckpointError};
 use crate::config::{ArchConfig, ModelKind};
@@ -152,6 +158,9 @@ struct StateExtra {
     stage: usize,
     stage_episodes: u64,
     valuenorm: ValueNormBits,
+    /// Setup range of a randomized run (absent in states saved before it existed).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    randomize: Option<String>,
 }
 
 pub struct Trainer {
@@ -169,6 +178,10 @@ pub struct Trainer {
     pub agent_steps: u64,
     pub stage: usize,
     pub stage_episodes: u64,
+    /// Randomized run: each update draws its setup from this range (see
+    /// [`Trainer::setup_for_update`]); `schedule` then holds one stage whose setup is the
+    /// range's largest (`hi`), which sizes the MAPPO critic, and the episode budget.
+    pub randomize: Option<SetupRange>,
     buf: Rollout,
     mb: MiniBatch,
 }
@@ -251,9 +264,68 @@ impl Trainer {
             agent_steps: 0,
             stage: 0,
             stage_episodes: 0,
+            randomize: None,
             buf: Rollout::default(),
             mb: MiniBatch::default(),
         })
+    }
+
+    /// Fresh networks trained on setups drawn from `range`, one draw per update (all
+    /// `n_envs` envs of a rollout share it), for `episodes` episodes. Refused before any
+    /// training when the range holds a setup the layout generator cannot place, or (MAPPO)
+    /// when its upper bounds exceed the config's `mappo_max_*` padding. MAPPO's actor is
+    /// padded to `mappo_max_*` as usual, its critic to the range's most robots.
+    pub fn new_randomized(
+        kind: ModelKind,
+        cfg: TrainConfig,
+        scenario: ScenarioConfig,
+        range: SetupRange,
+        episodes: u64,
+        seed: u64,
+    ) -> Result<Self, TrainError> {
+        Self::check_range(kind, &cfg, &scenario, range)?;
+        if episodes == 0 {
+            return Err(TrainError::Config(format!(
+                "setup range {range}: 0 episodes to train"
+            )));
+        }
+        let stage = Stage {
+            setup: range.hi,
+            episodes,
+        };
+        let mut t = Self::new(kind, cfg, scenario, vec![stage], seed)?;
+        t.randomize = Some(range);
+        Ok(t)
+    }
+
+    fn check_range(
+        kind: ModelKind,
+        cfg: &TrainConfig,
+        scenario: &ScenarioConfig,
+        range: SetupRange,
+    ) -> Result<(), TrainError> {
+        range
+            .check_padding(kind, cfg)
+            .and_then(|()| range.check_fits(scenario))
+            .map_err(|e| TrainError::Config(format!("setup range {range}: {e}")))
+    }
+
+    /// The setup update `update` (0-based) trains on: in a randomized run, the draw of
+    /// the generator seeded by (seed, update), a pure function of both; otherwise the
+    /// current stage's setup.
+    pub fn setup_for_update(&self, update: u64) -> Setup {
+        match self.randomize {
+            Some(r) => r.draw(&mut ChaCha8Rng::seed_from_u64(mix(self.seed, update, 4))),
+            None => self.schedule[self.stage.min(self.schedule.len() - 1)].setup,
+        }
+    }
+
+    /// `6.4_2:2000,12.8_4:100`, or `2..12.2..8_1..4:400` for a randomized run.
+    pub fn schedule_string(&self) -> String {
+        match self.randomize {
+            Some(r) => format!("{r}:{}", self.total_episodes()),
+            None => format_curriculum(&self.schedule),
+        }
     }
 
     fn archs(
@@ -303,9 +375,10 @@ impl Trainer {
         self.stage >= self.schedule.len()
     }
 
-    /// Setup of the stage being trained (the last one when finished).
+    /// Setup of the stage being trained (the last one when finished); in a randomized
+    /// run, the setup the next update draws.
     pub fn current_setup(&self) -> Setup {
-        self.schedule[self.stage.min(self.schedule.len() - 1)].setup
+        self.setup_for_update(self.update)
     }
 
     /// Collect one rollout and run the PPO epochs.
@@ -316,7 +389,13 @@ impl Trainer {
         let setup = self.current_setup();
         let stage_start = self.stage_episodes == 0;
         let t0 = Instant::now();
-        let metrics = self.rollout(setup)?;
+        let metrics = self.rollout(setup).map_err(|e| match (self.randomize, e) {
+            (Some(r), TrainError::Sim(e)) => TrainError::Config(format!(
+                "update {}: setup {setup} drawn from {r}: {e}",
+                self.update + 1
+            )),
+            (_, e) => e,
+        })?;
         let rollout_secs = t0.elapsed().as_secs_f64();
         let t1 = Instant::now();
         let mut st = self.ppo(setup.robots)?;
@@ -597,8 +676,12 @@ impl Trainer {
     pub fn training_meta(&self) -> serde_json::Value {
         serde_json::json!({
             "model": self.kind,
-            "setup": self.current_setup().to_string(),
-            "schedule": format_curriculum(&self.schedule),
+            "setup": match self.randomize {
+                Some(r) => r.to_string(),
+                None => self.current_setup().to_string(),
+            },
+            "schedule": self.schedule_string(),
+            "randomize": self.randomize.map(|r| r.to_string()),
             "episodes": self.episodes,
             "updates": self.update,
             "agent_steps": self.agent_steps,
@@ -628,6 +711,7 @@ impl Trainer {
             stage: self.stage,
             stage_episodes: self.stage_episodes,
             valuenorm: self.vnorm.to_bits(),
+            randomize: self.randomize.map(|r| r.to_string()),
         };
         let v = serde_json::to_value(&extra).map_err(|e| TrainError::Config(e.to_string()))?;
         save_trainer_state(path, &self.actor, &self.critic, v)?;
@@ -656,6 +740,11 @@ impl Trainer {
         t.stage = extra.stage;
         t.stage_episodes = extra.stage_episodes;
         t.vnorm = ValueNorm::from_bits(extra.valuenorm);
+        if let Some(r) = &extra.randomize {
+            let range: SetupRange = r.parse()?;
+            Self::check_range(t.kind, &t.cfg, &t.scenario, range)?;
+            t.randomize = Some(range);
+        }
         if let Some(s) = schedule {
             if s != saved {
                 t.set_schedule(s)?;
@@ -666,6 +755,7 @@ impl Trainer {
 
     /// Replace the schedule (e.g. to extend a resumed run): the stage is re-derived from
     /// the episodes trained so far; refused when it would change the network shapes.
+    /// A randomized run becomes a fixed-setup one (see [`Trainer::set_randomize`]).
     pub fn set_schedule(&mut self, s: Vec<Stage>) -> Result<(), TrainError> {
         if s.is_empty() {
             return Err(TrainError::Config("empty schedule".into()));
@@ -676,6 +766,7 @@ impl Trainer {
                 "the new schedule changes the network shapes (MAPPO critic padding)".into(),
             ));
         }
+        self.randomize = None;
         self.schedule = s;
         let mut left = self.episodes;
         self.stage = 0;
@@ -690,5 +781,47 @@ impl Trainer {
             }
         }
         Ok(())
+    }
+
+    /// Train on setups drawn from `range` until `episodes` episodes in total (counted
+    /// from the start of the run), e.g. to switch a resumed run to, or extend, a
+    /// randomized schedule. Same refusals as [`Trainer::new_randomized`] and
+    /// [`Trainer::set_schedule`].
+    pub fn set_randomize(&mut self, range: SetupRange, episodes: u64) -> Result<(), TrainError> {
+        Self::check_range(self.kind, &self.cfg, &self.scenario, range)?;
+        if episodes == 0 {
+            return Err(TrainError::Config(format!(
+                "setup range {range}: 0 episodes to train"
+            )));
+        }
+        self.set_schedule(vec![Stage {
+            setup: range.hi,
+            episodes,
+        }])?;
+        self.randomize = Some(range);
+        Ok(())
+    }
+
+    /// A new total episode budget: the last stage (the only one of a randomized run)
+    /// absorbs the difference; refused when it would end before the last stage starts.
+    pub fn set_total_episodes(&mut self, total: u64) -> Result<(), TrainError> {
+        let before: u64 = self.schedule[..self.schedule.len() - 1]
+            .iter()
+            .map(|x| x.episodes)
+            .sum();
+        if total <= before {
+            return Err(TrainError::Config(format!(
+                "{total} episodes end before the last curriculum stage (which starts at \
+                 episode {before})"
+            )));
+        }
+        match self.randomize {
+            Some(r) => self.set_randomize(r, total),
+            None => {
+                let mut s = self.schedule.clone();
+                s.last_mut().expect("non-empty").episodes = total - before;
+                self.set_schedule(s)
+            }
+        }
     }
 }
