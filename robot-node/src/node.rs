@@ -23,7 +23,7 @@ use msgs::{Bool, Clock, EntityTopic, PoseStamped, Profile, RosMessage, Twist};
 use crate::args::{ControllerKind, Params};
 use crate::controller::{Controller, GreedyController, PolicyController};
 use crate::tick::{Brain, Outcome};
-use crate::world::{Counters, DropReason, World, WorldConfig};
+use crate::world::{Accepted, Counters, DropReason, World, WorldConfig, WriterId};
 use msgs::dds::{stamp_key_info, StampedWriter};
 use obs::greedy::GreedyParams;
 
@@ -610,7 +610,12 @@ fn drain(sub: &Sub, brain: &mut Brain, now: f64) {
     for _ in 0..1000 {
         let res = match &sub.kind {
             SubKind::Pose(s) => match s.take() {
-                Ok(Some((m, _))) => Some(brain.world.on_pose(&sub.topic, &m, now)),
+                Ok(Some((m, info))) => Some(brain.world.on_pose_from(
+                    &sub.topic,
+                    &m,
+                    writer_id(&info),
+                    now,
+                )),
                 Ok(None) => None,
                 Err(e) => {
                     debug!("undecodable sample on {}: {e:?}", sub.topic.ros_name());
@@ -622,6 +627,7 @@ fn drain(sub: &Sub, brain: &mut Brain, now: f64) {
                     &sub.topic,
                     m.data,
                     stamp_key_info(&info),
+                    writer_id(&info),
                     now,
                 )),
                 Ok(None) => None,
@@ -633,7 +639,16 @@ fn drain(sub: &Sub, brain: &mut Brain, now: f64) {
         };
         match res {
             None => return,
-            Some(Ok(())) => brain.counters.accepted += 1,
+            Some(Ok(a)) => {
+                brain.counters.accepted += 1;
+                if a == Accepted::NewWriter {
+                    brain.counters.writer_changes += 1;
+                    warn!(
+                        "{}: the pinned writer's data went stale; now pinned to a new writer",
+                        sub.topic.ros_name()
+                    );
+                }
+            }
             Some(Err(r)) => {
                 if brain.counters.dropped() < 20 || brain.counters.dropped().is_power_of_two() {
                     warn!("dropped a sample on {}: {r:?}", sub.topic.ros_name());
@@ -642,4 +657,9 @@ fn drain(sub: &Sub, brain: &mut Brain, now: f64) {
             }
         }
     }
+}
+
+/// The DDS writer a received sample came from (its GUID).
+fn writer_id(info: &ros2_client::message_info::MessageInfo) -> WriterId {
+    info.publisher_gid().to_bytes16()
 }

@@ -3,10 +3,24 @@
 //!
 //! Times are seconds on a monotonic clock chosen by the caller (the node uses wall time
 //! since start), so this module is deterministic and testable without DDS.
+//!
+//! Writer pinning (docs/adr/0004-writer-pinning.md): every input topic (pose and flag of
+//! each entity) is pinned to the DDS writer whose valid sample it holds; a valid sample
+//! from another writer is refused ([`DropReason::ForeignWriter`]) unless the pinned
+//! writer's data is older than the entity's staleness timeout ([`World::pin_release_s`]),
+//! in which case the new writer takes the pin ([`Accepted::NewWriter`]).
 
 use std::collections::BTreeMap;
 
 use msgs::{Entity, EntityTopic, Leaf, PoseStamped, RoomBounds};
+
+/// Identity of the DDS writer a sample came from: its 16-byte RTPS GUID (ros2-client's
+/// `MessageInfo::publisher_gid().to_bytes16()`).
+pub type WriterId = [u8; 16];
+
+/// The writer id the DDS-free convenience methods ([`World::on_pose`], [`World::on_flag`])
+/// attribute their samples to.
+pub const DEFAULT_WRITER: WriterId = [0; 16];
 
 /// A value and when it arrived.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -16,6 +30,18 @@ pub struct Sample<T> {
     /// Simulator step stamp (microseconds, [`msgs::dds::stamp_key_ns`]): a pose's header
     /// stamp, a flag's DDS source timestamp. Used in lockstep only.
     pub stamp: Option<i64>,
+    /// The writer that published it: the topic's pinned writer.
+    pub writer: WriterId,
+}
+
+/// A sample was taken.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Accepted {
+    /// From the pinned writer, or the topic's first valid sample (which pins its writer).
+    Stored,
+    /// From a new writer, which replaced a pinned writer whose data had gone stale (e.g.
+    /// a restarted sim_bridge).
+    NewWriter,
 }
 
 impl<T: Copy> Sample<T> {
@@ -44,6 +70,9 @@ pub enum DropReason {
     OutOfRoom,
     /// A topic/type combination outside the contract.
     Unexpected,
+    /// A valid sample from a writer other than the topic's pinned writer, while the
+    /// pinned writer's data is fresh (an impostor claiming the entity's name).
+    ForeignWriter,
 }
 
 /// Counters of everything received, dropped and done; logged periodically and on exit.
@@ -54,6 +83,10 @@ pub struct Counters {
     pub dropped_non_finite: u64,
     pub dropped_out_of_room: u64,
     pub dropped_unexpected: u64,
+    /// Valid samples refused because another writer holds the topic's pin.
+    pub dropped_foreign_writer: u64,
+    /// Pins handed to a new writer after the pinned writer's data went stale.
+    pub writer_changes: u64,
     pub ticks: u64,
     pub commands: u64,
     pub zero_own_stale: u64,
@@ -79,6 +112,7 @@ impl Counters {
             DropReason::NonFinite => self.dropped_non_finite += 1,
             DropReason::OutOfRoom => self.dropped_out_of_room += 1,
             DropReason::Unexpected => self.dropped_unexpected += 1,
+            DropReason::ForeignWriter => self.dropped_foreign_writer += 1,
         }
     }
     pub fn dropped(&self) -> u64 {
@@ -86,6 +120,7 @@ impl Counters {
             + self.dropped_non_finite
             + self.dropped_out_of_room
             + self.dropped_unexpected
+            + self.dropped_foreign_writer
     }
 }
 
@@ -97,6 +132,8 @@ impl Counters {
         self.dropped_non_finite += o.dropped_non_finite;
         self.dropped_out_of_room += o.dropped_out_of_room;
         self.dropped_unexpected += o.dropped_unexpected;
+        self.dropped_foreign_writer += o.dropped_foreign_writer;
+        self.writer_changes += o.writer_changes;
         self.ticks += o.ticks;
         self.commands += o.commands;
         self.zero_own_stale += o.zero_own_stale;
@@ -119,7 +156,9 @@ impl Counters {
                 "non_finite": self.dropped_non_finite,
                 "out_of_room": self.dropped_out_of_room,
                 "unexpected": self.dropped_unexpected,
+                "foreign_writer": self.dropped_foreign_writer,
             },
+            "writer_changes": self.writer_changes,
             "ticks": self.ticks,
             "commands": self.commands,
             "zero": {
@@ -141,8 +180,8 @@ impl std::fmt::Display for Counters {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         write!(
             f,
-            "accepted={} dropped(decode={} non_finite={} out_of_room={} unexpected={}) \
-             ticks={} commands={} zero(own_stale={} obs_invalid={} controller_error={} bad_output={}) \
+            "accepted={} dropped(decode={} non_finite={} out_of_room={} unexpected={} \
+             foreign_writer={}) writer_changes={} ticks={} commands={} zero(own_stale={} obs_invalid={} controller_error={} bad_output={}) \
              publish_errors={} subscriptions={} lockstep_wait_timeouts={} \
              ticks_missed={} tick_late_max_us={}",
             self.accepted,
@@ -150,6 +189,8 @@ impl std::fmt::Display for Counters {
             self.dropped_non_finite,
             self.dropped_out_of_room,
             self.dropped_unexpected,
+            self.dropped_foreign_writer,
+            self.writer_changes,
             self.ticks,
             self.commands,
             self.zero_own_stale,
@@ -228,6 +269,23 @@ impl std::fmt::Display for OwnStale {
     }
 }
 
+/// The writer-pin rule for one topic whose current sample is `held`: the first valid
+/// sample pins its writer; the pinned writer is always accepted; another writer is
+/// refused while the held sample is at most `release_s` old and takes the pin after.
+pub fn admit<T>(
+    held: &Option<Sample<T>>,
+    writer: WriterId,
+    now: f64,
+    release_s: f64,
+) -> Result<Accepted, DropReason> {
+    match held {
+        None => Ok(Accepted::Stored),
+        Some(s) if s.writer == writer => Ok(Accepted::Stored),
+        Some(s) if now - s.at > release_s => Ok(Accepted::NewWriter),
+        Some(_) => Err(DropReason::ForeignWriter),
+    }
+}
+
 impl World {
     pub fn new(me: &str, cfg: WorldConfig) -> Self {
         Self {
@@ -249,13 +307,26 @@ impl World {
         }
     }
 
-    /// A pose arrived on `topic`: validate and store it.
+    /// A pose arrived on `topic`: validate and store it (attributed to [`DEFAULT_WRITER`]).
     pub fn on_pose(
         &mut self,
         topic: &EntityTopic,
         msg: &PoseStamped,
         now: f64,
-    ) -> Result<(), DropReason> {
+    ) -> Result<Accepted, DropReason> {
+        self.on_pose_from(topic, msg, DEFAULT_WRITER, now)
+    }
+
+    /// A pose arrived on `topic` from DDS writer `writer`: validate it, check the topic's
+    /// writer pin, store it. Invalid samples are refused before the pin is looked at, so
+    /// they neither take nor refresh a pin.
+    pub fn on_pose_from(
+        &mut self,
+        topic: &EntityTopic,
+        msg: &PoseStamped,
+        writer: WriterId,
+        now: f64,
+    ) -> Result<Accepted, DropReason> {
         if topic.leaf != Leaf::Pose {
             return Err(DropReason::Unexpected);
         }
@@ -264,12 +335,16 @@ impl World {
             msgs::InvalidMsg::OutOfRoom { .. } => DropReason::OutOfRoom,
         })?;
         let stamp = Some(msgs::dds::stamp_key_time(&msg.header.stamp));
-        self.slot(&topic.entity).pose = Some(Sample {
+        let release = self.pin_release_s(&topic.entity);
+        let slot = &mut self.slot(&topic.entity).pose;
+        let accepted = admit(slot, writer, now, release)?;
+        *slot = Some(Sample {
             value: xy,
             at: now,
             stamp,
+            writer,
         });
-        Ok(())
+        Ok(accepted)
     }
 
     /// A Bool arrived on `topic` (`has_part` of a robot or `part_ready` of a machine).
@@ -278,28 +353,49 @@ impl World {
         topic: &EntityTopic,
         value: bool,
         now: f64,
-    ) -> Result<(), DropReason> {
-        self.on_flag_stamped(topic, value, None, now)
+    ) -> Result<Accepted, DropReason> {
+        self.on_flag_stamped(topic, value, None, DEFAULT_WRITER, now)
     }
 
-    /// A Bool arrived, with the step stamp of its DDS source timestamp.
+    /// A Bool arrived from DDS writer `writer`, with the step stamp of its DDS source
+    /// timestamp; pinned like poses.
     pub fn on_flag_stamped(
         &mut self,
         topic: &EntityTopic,
         value: bool,
         stamp: Option<i64>,
+        writer: WriterId,
         now: f64,
-    ) -> Result<(), DropReason> {
+    ) -> Result<Accepted, DropReason> {
         match (&topic.entity, topic.leaf) {
             (Entity::Robot(_), Leaf::HasPart) | (Entity::Machine(_), Leaf::PartReady) => {}
             _ => return Err(DropReason::Unexpected),
         }
-        self.slot(&topic.entity).flag = Some(Sample {
+        let release = self.pin_release_s(&topic.entity);
+        let slot = &mut self.slot(&topic.entity).flag;
+        let accepted = admit(slot, writer, now, release)?;
+        *slot = Some(Sample {
             value,
             at: now,
             stamp,
+            writer,
         });
-        Ok(())
+        Ok(accepted)
+    }
+
+    /// How long the pinned writer of `entity`'s topics must have been silent (no valid
+    /// sample) before another writer may take the pin: the entity's staleness timeout,
+    /// i.e. exactly when its data drops out of the observation. Machines and storages
+    /// whose staleness is disabled (`static_stale_timeout_s <= 0`) use the robots'
+    /// timeout, so a restarted bridge's latched topics are still taken over.
+    pub fn pin_release_s(&self, entity: &Entity) -> f64 {
+        match entity {
+            Entity::Robot(_) => self.cfg.stale_timeout_s,
+            Entity::Machine(_) | Entity::Storage(_) if self.cfg.static_stale_timeout_s > 0.0 => {
+                self.cfg.static_stale_timeout_s
+            }
+            _ => self.cfg.stale_timeout_s,
+        }
     }
 
     /// Build the observation input from fresh data only, or say why own data is unusable.
@@ -555,5 +651,179 @@ mod tests {
             Err(DropReason::Unexpected)
         );
         assert_eq!(w.observation(0.2).unwrap().own_pos, [0.2, 0.2]);
+    }
+    const BRIDGE: WriterId = [1; 16];
+    const IMPOSTOR: WriterId = [2; 16];
+    const BRIDGE2: WriterId = [3; 16];
+
+    /// Own position as last stored, whatever its age.
+    fn own_pose_at(w: &World) -> [f32; 2] {
+        let p = w.own.pose.unwrap().value;
+        [p[0] as f32, p[1] as f32]
+    }
+
+    #[test]
+    fn first_writer_is_pinned_and_an_impostor_is_refused() {
+        let mut w = World::new("robot_1", cfg());
+        let t = robot("robot_1", Leaf::Pose);
+        assert_eq!(
+            w.on_pose_from(&t, &pose(0.3, 0.3), BRIDGE, 0.0),
+            Ok(Accepted::Stored)
+        );
+        // a valid, plausible pose from another writer: refused, the data is unchanged
+        for k in 0..10 {
+            let now = 0.05 * k as f64;
+            assert_eq!(
+                w.on_pose_from(&t, &pose(-1.0, -1.0), IMPOSTOR, now),
+                Err(DropReason::ForeignWriter)
+            );
+            assert_eq!(
+                w.on_pose_from(&t, &pose(0.3, 0.3 + 0.01 * k as f64), BRIDGE, now),
+                Ok(Accepted::Stored)
+            );
+        }
+        assert_eq!(own_pose_at(&w), [0.3, 0.39]);
+        // the same for peers, machines, storages and flags (one rule for every topic)
+        let peer = robot("robot_4", Leaf::Pose);
+        let m = machine(2, Leaf::Pose);
+        let s = storage(0, Leaf::Pose);
+        for t in [&peer, &m, &s] {
+            w.on_pose_from(t, &pose(0.1, 0.1), BRIDGE, 1.0).unwrap();
+            assert_eq!(
+                w.on_pose_from(t, &pose(0.2, 0.2), IMPOSTOR, 1.1),
+                Err(DropReason::ForeignWriter)
+            );
+        }
+        for t in [robot("robot_1", Leaf::HasPart), machine(2, Leaf::PartReady)] {
+            w.on_flag_stamped(&t, false, None, BRIDGE, 1.0).unwrap();
+            assert_eq!(
+                w.on_flag_stamped(&t, true, None, IMPOSTOR, 1.1),
+                Err(DropReason::ForeignWriter)
+            );
+        }
+        let mut c = Counters::default();
+        c.drop(DropReason::ForeignWriter);
+        assert_eq!((c.dropped_foreign_writer, c.dropped()), (1, 1));
+        assert_eq!(c.to_json()["dropped"]["foreign_writer"], 1);
+    }
+
+    #[test]
+    fn a_new_writer_takes_the_pin_once_the_pinned_data_is_stale() {
+        // robots: stale_timeout_s = 1.0
+        let mut w = World::new("robot_0", cfg());
+        let t = robot("robot_0", Leaf::Pose);
+        w.on_pose_from(&t, &pose(0.3, 0.3), BRIDGE, 10.0).unwrap();
+        // the bridge dies at 10.0: still refused while its data is fresh (<= 1 s old)
+        assert_eq!(
+            w.on_pose_from(&t, &pose(0.5, 0.5), BRIDGE2, 11.0),
+            Err(DropReason::ForeignWriter)
+        );
+        // a restarted bridge (new writer) is accepted once the old data is stale
+        assert_eq!(
+            w.on_pose_from(&t, &pose(0.5, 0.5), BRIDGE2, 11.01),
+            Ok(Accepted::NewWriter)
+        );
+        assert_eq!(own_pose_at(&w), [0.5, 0.5]);
+        // ...and now holds the pin: the old writer coming back is the foreign one
+        assert_eq!(
+            w.on_pose_from(&t, &pose(0.3, 0.3), BRIDGE, 11.1),
+            Err(DropReason::ForeignWriter)
+        );
+        assert_eq!(
+            w.on_pose_from(&t, &pose(0.6, 0.5), BRIDGE2, 11.2),
+            Ok(Accepted::Stored)
+        );
+        // machines and storages release after static_stale_timeout_s (2.0 here)
+        let m = machine(0, Leaf::Pose);
+        w.on_pose_from(&m, &pose(0.5, 0.5), BRIDGE, 0.0).unwrap();
+        assert_eq!(
+            w.on_pose_from(&m, &pose(0.5, 0.5), BRIDGE2, 1.5),
+            Err(DropReason::ForeignWriter)
+        );
+        assert_eq!(
+            w.on_pose_from(&m, &pose(0.5, 0.5), BRIDGE2, 2.5),
+            Ok(Accepted::NewWriter)
+        );
+    }
+
+    #[test]
+    fn invalid_samples_neither_take_nor_refresh_a_pin() {
+        let mut w = World::new("robot_0", cfg());
+        let t = robot("robot_0", Leaf::Pose);
+        let mut nan = pose(0.0, 0.0);
+        nan.pose.position.y = f64::NAN;
+        // a writer of garbage does not get pinned...
+        assert_eq!(
+            w.on_pose_from(&t, &nan, IMPOSTOR, 0.0),
+            Err(DropReason::NonFinite)
+        );
+        assert_eq!(
+            w.on_pose_from(&t, &pose(5.0, 0.0), IMPOSTOR, 0.0),
+            Err(DropReason::OutOfRoom)
+        );
+        // ...so the first valid writer is
+        assert_eq!(
+            w.on_pose_from(&t, &pose(0.1, 0.1), BRIDGE, 0.1),
+            Ok(Accepted::Stored)
+        );
+        // the pinned writer's invalid samples are counted as invalid, not as foreign,
+        // and do not keep its pin alive
+        assert_eq!(
+            w.on_pose_from(&t, &nan, BRIDGE, 0.5),
+            Err(DropReason::NonFinite)
+        );
+        // (the last valid sample was at 0.1: stale after 1.1)
+        assert_eq!(
+            w.on_pose_from(&t, &pose(0.2, 0.2), IMPOSTOR, 1.05),
+            Err(DropReason::ForeignWriter)
+        );
+        assert_eq!(
+            w.on_pose_from(&t, &pose(0.2, 0.2), IMPOSTOR, 1.15),
+            Ok(Accepted::NewWriter)
+        );
+    }
+
+    #[test]
+    fn static_pins_release_after_the_robot_timeout_when_static_staleness_is_off() {
+        let mut c = cfg();
+        c.static_stale_timeout_s = 0.0;
+        let mut w = World::new("robot_0", c);
+        let s = storage(1, Leaf::Pose);
+        assert_eq!(w.pin_release_s(&s.entity), 1.0);
+        assert_eq!(w.pin_release_s(&robot("robot_3", Leaf::Pose).entity), 1.0);
+        w.on_pose_from(&s, &pose(0.5, 0.5), BRIDGE, 0.0).unwrap();
+        assert_eq!(
+            w.on_pose_from(&s, &pose(0.5, 0.5), BRIDGE2, 0.9),
+            Err(DropReason::ForeignWriter)
+        );
+        assert_eq!(
+            w.on_pose_from(&s, &pose(0.5, 0.5), BRIDGE2, 1.1),
+            Ok(Accepted::NewWriter)
+        );
+    }
+
+    #[test]
+    fn admit_rule() {
+        let held = |writer, at| {
+            Some(Sample {
+                value: 0u8,
+                at,
+                stamp: None,
+                writer,
+            })
+        };
+        assert_eq!(admit::<u8>(&None, BRIDGE, 0.0, 1.0), Ok(Accepted::Stored));
+        assert_eq!(
+            admit(&held(BRIDGE, 0.0), BRIDGE, 9.0, 1.0),
+            Ok(Accepted::Stored)
+        );
+        assert_eq!(
+            admit(&held(BRIDGE, 0.0), IMPOSTOR, 1.0, 1.0),
+            Err(DropReason::ForeignWriter)
+        );
+        assert_eq!(
+            admit(&held(BRIDGE, 0.0), IMPOSTOR, 1.001, 1.0),
+            Ok(Accepted::NewWriter)
+        );
     }
 }

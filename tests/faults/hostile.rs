@@ -3,8 +3,11 @@
 //! topic), NaN cmd_vel, a 10 kHz flood of NaN poses on a real robot's own pose topic, and
 //! a foreign publisher claiming `/robot_1/pose`. Nothing may crash, RSS stays bounded,
 //! the fleet keeps delivering, and every rejection is counted (robot_node's `dropped`
-//! counters, sim_bridge's `cmds_dropped_*`). The impostor's *valid* poses cannot be told
-//! apart from the bridge's and are not rejected: its effect is measured and reported.
+//! counters, sim_bridge's `cmds_dropped_*`). The impostor's *valid* poses come from
+//! another DDS writer than the bridge's, which every robot_node has pinned the topic to
+//! (docs/adr/0004-writer-pinning.md): they are refused and counted as
+//! `dropped/foreign_writer` by all three robots, no pin changes hands, and robot_1 keeps
+//! acting on its real pose.
 
 mod common;
 use common::*;
@@ -55,6 +58,10 @@ fn hostile_publisher_is_counted_and_the_fleet_keeps_working() {
     // clean phase
     sleep_s(12.0);
     let m_clean = bridge.last_json().expect("bridge metrics");
+    let counters_clean: Vec<serde_json::Value> = robots
+        .iter()
+        .map(|r| r.last_json().unwrap_or_default())
+        .collect();
     let rss_before: Vec<(String, u64)> = std::iter::once(&bridge)
         .chain(robots.iter())
         .map(|p| (p.name.clone(), p.rss_kb()))
@@ -279,7 +286,50 @@ fn hostile_publisher_is_counted_and_the_fleet_keeps_working() {
             failures.push(format!("robot_{i}: a rejection kind not counted: {c}"));
         }
     }
-    let _ = robot_counters;
+    // the impostor on /robot_1/pose: every robot reads that topic (robot_1 as its own
+    // pose, the others as a peer's) and must refuse and count its samples
+    let impostor_sent = slow_sent[5] as f64;
+    let mut impostor_rows = Vec::new();
+    for (i, (c, c0)) in final_counters.iter().zip(&counters_clean).enumerate() {
+        let foreign = num(c, "dropped/foreign_writer");
+        let changes = num(c, "writer_changes");
+        eprintln!(
+            "robot_{i}: dropped foreign_writer {foreign} of {impostor_sent} impostor samples, writer_changes {changes}"
+        );
+        impostor_rows.push(serde_json::json!({"robot": format!("robot_{i}"),
+            "dropped_foreign_writer": foreign, "writer_changes": changes}));
+        if !(foreign >= 0.8 * impostor_sent && foreign <= impostor_sent) {
+            failures.push(format!(
+                "robot_{i}: {foreign} foreign-writer drops for {impostor_sent} impostor samples"
+            ));
+        }
+        // the impostor never took over a pin (that would need the bridge silent for the
+        // whole stale timeout)
+        if changes != 0.0 {
+            failures.push(format!("robot_{i}: {changes} pinned writers replaced"));
+        }
+        if num(c0, "dropped/foreign_writer") != 0.0 {
+            failures.push(format!(
+                "robot_{i}: foreign-writer drops before any impostor: {c0}"
+            ));
+        }
+    }
+    // robot_1 kept acting on the bridge's poses through the hostile phase: it commanded
+    // (own data fresh) on nearly every tick, as in the clean phase
+    let r1_hostile = &robot_counters[1];
+    let r1_clean = &counters_clean[1];
+    let ticks = num(r1_hostile, "ticks") - num(r1_clean, "ticks");
+    let cmds = num(r1_hostile, "commands") - num(r1_clean, "commands");
+    let stale = num(r1_hostile, "zero/own_stale") - num(r1_clean, "zero/own_stale");
+    eprintln!("robot_1 during the hostile phase: {cmds} commands, {stale} own-stale zero ticks of {ticks} ticks");
+    if !(ticks > 0.0 && cmds >= 0.9 * ticks) {
+        failures.push(format!(
+            "robot_1 commanded on only {cmds} of {ticks} ticks during the hostile phase ({stale} own stale)"
+        ));
+    }
+    if num(&m_end, "robots") != 3.0 {
+        failures.push(format!("the bridge lost a robot: {m_end}"));
+    }
     let flood_n = flood_sent.load(Ordering::Relaxed);
     report(serde_json::json!({
         "fault": "hostile publisher",
@@ -292,6 +342,9 @@ fn hostile_publisher_is_counted_and_the_fleet_keeps_working() {
         "bridge_dropped_decode": bd, "bridge_dropped_non_finite": bn,
         "bridge_spawned": num(&m_end, "spawned"),
         "robots": rows,
+        "impostor_sent": impostor_sent, "impostor": impostor_rows,
+        "robot_1_hostile_ticks": ticks, "robot_1_hostile_commands": cmds,
+        "robot_1_hostile_own_stale": stale,
         "rss_kb_before": rss_before, "rss_kb_after": rss_after,
         "collisions_clean": num(&m_clean, "collisions"),
         "collisions_end": num(&m_end, "collisions"),
