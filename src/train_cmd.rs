@@ -211,11 +211,11 @@ fn stop_flag() -> Result<&'static AtomicBool> {
 }
 
 pub fn run(a: TrainArgs) -> Result<()> {
+    let range = range_from_args(&a)?;
+    let schedule = schedule_from_args(&a)?;
     std::fs::create_dir_all(&a.out).with_context(|| format!("create {}", a.out.display()))?;
     let state_path = a.out.join("trainer_state.safetensors");
     let log_path = a.out.join("log.csv");
-    let range = range_from_args(&a)?;
-    let schedule = schedule_from_args(&a)?;
     let mut t = if a.resume {
         if !state_path.exists() {
             bail!("--resume: no {} to resume from", state_path.display());
