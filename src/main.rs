@@ -6,6 +6,8 @@ mod bench_sim;
 mod eval_cmd;
 mod fleet;
 mod plot;
+mod plot_cmd;
+mod plot_font;
 mod render;
 mod sim_cmd;
 mod stats;
@@ -41,6 +43,8 @@ enum Cmd {
     Bag(bag_cmd::BagArgs),
     /// Record every contract topic of a running fleet into a bag until Ctrl-C / SIGTERM.
     Record(bag_cmd::RecordArgs),
+    /// PNG figures of the experiments: eval bar charts, training curves (docs/experiments).
+    Plot(plot_cmd::PlotArgs),
     /// Print the default scenario config (TOML) to start a custom one from.
     Config,
 }
@@ -55,6 +59,7 @@ fn main() -> Result<()> {
         Cmd::Eval(a) => eval_cmd::run(a),
         Cmd::Bag(a) => bag_cmd::run(a),
         Cmd::Record(a) => bag_cmd::record(a),
+        Cmd::Plot(a) => plot_cmd::run(a),
         Cmd::Config => {
             print!("{}", sim::ScenarioConfig::default().to_toml());
             Ok(())

@@ -18,6 +18,12 @@
 #   C  zero-shot: the 6.4_2 models of A evaluated on 2.2_2 ... 42.28_14 (MAPPO padded to
 #      42.28_14, trained as such)
 #   D  curriculum with a short (200 x SCALE) initial training
+#
+# Every experiment also evaluates the scripted greedy baseline on its setups (same episodes
+# and eval seed, runs/exp/<name>/greedy/eval, skipped when already there), puts the paper's
+# MU next to ours (bench/experiments/paper_mu.csv: Tables I-IV) and draws
+# docs/experiments/<name>_{parts,collisions,mu,curves}.png with `tending plot`. The text
+# under the table's marker line in docs/experiments/<name>.md survives regeneration.
 set -euo pipefail
 cd "$(dirname "$0")/../.."
 SCALE="${SCALE:-0.1}"
@@ -53,14 +59,47 @@ train() { # out model seed cfg args...
     touch "$out/.done"
 }
 
-evaluate() { # checkpoint setups out
+has_eval() { # results.csv setups: every setup evaluated with EVAL_EPISODES episodes?
+    [ -f "$1" ] && python3 - "$1" "$2" "$EVAL_EPISODES" <<'PY'
+import csv, sys
+got = {r["setup"] for r in csv.DictReader(open(sys.argv[1])) if r["episodes"] == sys.argv[3]}
+sys.exit(0 if set(sys.argv[2].split(",")) <= got else 1)
+PY
+}
+
+evaluate() { # checkpoint setups out (skipped when out has them all, newer than checkpoint)
+    [ "$3/results.csv" -nt "$1" ] && has_eval "$3/results.csv" "$2" && return
     "$T" eval --checkpoint "$1" --setups "$2" --episodes "$EVAL_EPISODES" --seeds 0 --out "$3" >/dev/null
+}
+
+greedy() { # name setups: the scripted baseline on the experiment's setups
+    local out="runs/exp/$1/greedy/eval"
+    has_eval "$out/results.csv" "$2" && return
+    echo "== eval greedy -> $out ($2)"
+    "$T" eval --policy greedy --setups "$2" --episodes "$EVAL_EPISODES" --seeds 0 --out "$out" >/dev/null
+}
+
+plot_bin() { # a tending that has `plot` (TENDING may be an older copy)
+    if "$T" plot --help >/dev/null 2>&1; then echo "$T"; return; fi
+    target/release/tending plot --help >/dev/null 2>&1 || cargo build --release --bin tending >&2
+    echo target/release/tending
 }
 
 table() { # name title csv-glob...
     local name="$1" title="$2"; shift 2
-    python3 bench/experiments/table.py "$title" "$SCALE" "$SEEDS" "$@" > "docs/experiments/$name.md"
+    python3 bench/experiments/table.py --exp "$name" --paper bench/experiments/paper_mu.csv \
+        --eval-episodes "$EVAL_EPISODES" --out "docs/experiments/$name.md" \
+        "$title" "$SCALE" "$SEEDS" "$@"
     echo "wrote docs/experiments/$name.md"
+    "$(plot_bin)" plot bars --out "docs/experiments/$name" --title "$title" \
+        --paper bench/experiments/paper_mu.csv --experiment "$name" "$@" \
+        || echo "!! plot bars for $name failed" >&2
+}
+
+curves() { # name title log.csv...
+    local name="$1" title="$2"; shift 2
+    "$(plot_bin)" plot curves --out "docs/experiments/${name}_curves.png" --title "$title" "$@" \
+        || echo "!! plot curves for $name failed" >&2
 }
 
 exp_a() {
@@ -78,20 +117,25 @@ exp_a() {
             done
         done
     done
-    table A "A: full retraining" runs/exp/A/*/*/seed*/eval/results.csv
+    greedy A "${setups// /,}"
+    table A "A: full retraining" runs/exp/A/*/*/seed*/eval/results.csv runs/exp/A/greedy/eval/results.csv
+    curves A "A: full retraining, training per setup" --metrics reward,mu runs/exp/A/*/*/seed*/log.csv
 }
 
 exp_c() {
     local cfg; cfg=$(train_cfg C 42 28 14)
     local e; e=$(eps 2000)
+    local setups=6.4_2,2.2_2,4.2_2,12.8_4,18.12_6,24.16_8,30.20_10,36.24_12,42.28_14
     for seed in $SEEDS; do
         for m in smappo mappo; do
             local out="runs/exp/C/$m/seed$seed"
             train "$out" "$m" "$seed" "$cfg" --setup 6.4_2 --episodes "$e"
-            evaluate "$out/policy.safetensors" 6.4_2,2.2_2,4.2_2,12.8_4,18.12_6,24.16_8,30.20_10,36.24_12,42.28_14 "$out/eval"
+            evaluate "$out/policy.safetensors" "$setups" "$out/eval"
         done
     done
-    table C "C: zero-shot from 6.4_2" runs/exp/C/*/seed*/eval/results.csv
+    greedy C "$setups"
+    table C "C: zero-shot from 6.4_2" runs/exp/C/*/seed*/eval/results.csv runs/exp/C/greedy/eval/results.csv
+    curves C "C: training on 6.4_2" runs/exp/C/*/seed*/log.csv
 }
 
 curriculum() { # name initial-episodes
@@ -106,13 +150,22 @@ curriculum() { # name initial-episodes
             evaluate "$out/policy.safetensors" 6.4_2,12.8_4,18.12_6,24.16_8 "$out/eval"
         done
     done
+    greedy "$name" 6.4_2,12.8_4,18.12_6,24.16_8
 }
 
-exp_b() { curriculum B 2000; table B "B: curriculum" runs/exp/B/*/seed*/eval/results.csv; }
-exp_d() { curriculum D 200; table D "D: curriculum, short initial training" runs/exp/D/*/seed*/eval/results.csv; }
+exp_b() {
+    curriculum B 2000
+    table B "B: curriculum" runs/exp/B/*/seed*/eval/results.csv runs/exp/B/greedy/eval/results.csv
+    curves B "B: curriculum" runs/exp/B/*/seed*/log.csv
+}
+exp_d() {
+    curriculum D 200
+    table D "D: curriculum, short initial training" runs/exp/D/*/seed*/eval/results.csv runs/exp/D/greedy/eval/results.csv
+    curves D "D: curriculum, short initial training" runs/exp/D/*/seed*/log.csv
+}
 
 case "${1:-}" in
     A) exp_a ;; B) exp_b ;; C) exp_c ;; D) exp_d ;;
     all) exp_a; exp_b; exp_c; exp_d ;;
-    *) sed -n '2,22p' "$0"; exit 2 ;;
+    *) sed -n '2,26p' "$0"; exit 2 ;;
 esac
