@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # The paper's four experiments (section V) with `tending train` / `tending eval`.
 #
-#   bench/experiments/run.sh A|B|C|D|all
+#   bench/experiments/run.sh A|B|C|D|R|all
 #
 # Budget: SCALE (default 0.1) multiplies every episode count of the paper (2,000 initial
 # episodes, 100 per curriculum step, 100 for 100.16_2), the same for SMAPPO and MAPPO so the
@@ -18,6 +18,8 @@
 #   C  zero-shot: the 6.4_2 models of A evaluated on 2.2_2 ... 42.28_14 (MAPPO padded to
 #      42.28_14, trained as such)
 #   D  curriculum with a short (200 x SCALE) initial training
+#   R  beyond the paper: randomized counts per update (RANGE, default 2..12.2..8_1..4) for
+#      C's budget, evaluated zero-shot on C's setups
 #
 # Every experiment also evaluates the scripted greedy baseline on its setups (same episodes
 # and eval seed, runs/exp/<name>/greedy/eval, skipped when already there), puts the paper's
@@ -164,8 +166,27 @@ exp_d() {
     curves D "D: curriculum, short initial training" runs/exp/D/*/seed*/log.csv
 }
 
+# Beyond the paper: one policy trained on randomized counts (drawn per update from RANGE,
+# default 2-12 robots, 2-8 machines, 1-4 storages) for the same episode budget as C, then
+# evaluated zero-shot on C's setups, to compare with C's single-setup (6.4_2) training.
+exp_r() {
+    local cfg; cfg=$(train_cfg R 42 28 14)
+    local e; e=$(eps 2000)
+    local setups=6.4_2,2.2_2,4.2_2,12.8_4,18.12_6,24.16_8,30.20_10,36.24_12,42.28_14
+    for seed in $SEEDS; do
+        for m in smappo mappo; do
+            local out="runs/exp/R/$m/seed$seed"
+            train "$out" "$m" "$seed" "$cfg" --randomize "${RANGE:-2..12.2..8_1..4}" --episodes "$e"
+            evaluate "$out/policy.safetensors" "$setups" "$out/eval"
+        done
+    done
+    greedy R "$setups"
+    table R "R: randomized counts per update (${RANGE:-2..12.2..8_1..4}), zero-shot" runs/exp/R/*/seed*/eval/results.csv runs/exp/R/greedy/eval/results.csv
+    curves R "R: training on randomized counts" runs/exp/R/*/seed*/log.csv
+}
+
 case "${1:-}" in
-    A) exp_a ;; B) exp_b ;; C) exp_c ;; D) exp_d ;;
-    all) exp_a; exp_b; exp_c; exp_d ;;
+    A) exp_a ;; B) exp_b ;; R) exp_r ;; C) exp_c ;; D) exp_d ;;
+    all) exp_a; exp_b; exp_c; exp_d; exp_r ;;
     *) sed -n '2,26p' "$0"; exit 2 ;;
 esac
