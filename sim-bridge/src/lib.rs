@@ -4,6 +4,7 @@
 //! - [`core`]: DDS-free logic: bodies by namespace, cmd_vel validation, spawn on first
 //!   command, despawn when stale, lockstep bookkeeping, `/tending/command`, metrics,
 //!   markers;
+//! - [`delay`]: the fault-injection hold of `test_cmd_delay_ms` / `test_state_delay_ms`;
 //! - [`node`]: the ros2-client node (per-entity publishers, cmd_vel discovery, step loop).
 //!
 //! Run-time commands on `/tending/command` (std_msgs/String): `add_machine [x y]`,
@@ -14,5 +15,6 @@
 //! logs go to stderr.
 
 pub mod core;
+pub mod delay;
 pub mod node;
 pub mod params;

@@ -18,6 +18,7 @@ use msgs::{
 };
 
 use crate::core::{Core, MetricsLine};
+use crate::delay::DelayQueue;
 use crate::params::{BridgeParams, Mode};
 
 fn dds_err<E: std::fmt::Debug>(what: &str) -> impl FnOnce(E) -> anyhow::Error + '_ {
@@ -61,6 +62,19 @@ fn subscription<M: RosMessage>(
 struct EntityWriters {
     pose: StampedWriter<PoseStamped>,
     flag: Option<StampedWriter<Bool>>,
+}
+
+/// One step's outgoing state, built right after the step; published at once or, with
+/// `-p test_state_delay_ms`, when it is due.
+struct StateFrame {
+    /// The step's stamp (sim time, ns): the source timestamp of every sample.
+    ns: i64,
+    robots: Vec<(String, PoseStamped, bool)>,
+    machines: Vec<(u32, PoseStamped, bool)>,
+    storages: Vec<(u32, PoseStamped)>,
+    markers: MarkerArray,
+    diag: DiagnosticArray,
+    clock: Clock,
 }
 
 const COMMAND_TOKEN: Token = Token(usize::MAX - 1);
@@ -165,9 +179,16 @@ fn event_loop(
     };
     let stdin_rx = p.stdin_commands.then(stdin_lines);
     // test_cmd_delay_ms: received commands waiting to reach the core
-    let cmd_delay = Duration::from_secs_f64(p.test_cmd_delay_ms / 1000.0);
-    let mut delayed: std::collections::VecDeque<(Instant, String, Twist, Option<i64>)> =
-        std::collections::VecDeque::new();
+    let mut delayed: DelayQueue<(String, Twist, Option<i64>)> =
+        DelayQueue::new(p.test_cmd_delay_ms);
+    // test_state_delay_ms: state frames waiting to be published
+    let mut state_q: DelayQueue<StateFrame> = DelayQueue::new(p.test_state_delay_ms);
+    if delayed.is_active() || state_q.is_active() {
+        warn!(
+            "fault injection: cmd_vel held {} ms, state held {} ms",
+            p.test_cmd_delay_ms, p.test_state_delay_ms
+        );
+    }
 
     let mut cmd_subs: Vec<(String, Subscription<Twist>)> = Vec::new();
     let mut robots_w: BTreeMap<String, EntityWriters> = BTreeMap::new();
@@ -197,23 +218,23 @@ fn event_loop(
         subscribe_cmd(node, &poll, &mut cmd_subs, n)?;
     }
 
-    // Publish the current state on every entity topic (creating/dropping writers as
-    // entities come and go), then markers, metrics and /clock last.
-    let publish_state = |core: &Core,
+    // Build the current state of every entity (creating/dropping writers as entities come
+    // and go; with `send` false only the writers); `send_frame` publishes a frame: entity
+    // topics, then markers, metrics and /clock last.
+    let prepare_state = |core: &Core,
                          node: &Node,
                          robots_w: &mut BTreeMap<String, EntityWriters>,
                          machines_w: &mut HashMap<u32, EntityWriters>,
                          storages_w: &mut HashMap<u32, EntityWriters>,
-                         rec: &mut Option<Recorder>,
                          send: bool|
-     -> anyhow::Result<()> {
+     -> anyhow::Result<Option<StateFrame>> {
         let stamp = core.stamp();
         let ns = stamp.sec as i64 * 1_000_000_000 + stamp.nanosec as i64;
         let pose =
             |c: [f32; 2]| PoseStamped::planar(stamp, topics::FRAME_ID, c[0] as f64, c[1] as f64);
         let states = core.robot_states();
         robots_w.retain(|n, _| states.iter().any(|s| &s.0 == n));
-        for (name, pos, has_part) in &states {
+        for (name, _, _) in &states {
             if !robots_w.contains_key(name) {
                 let w = EntityWriters {
                     pose: StampedWriter::new(
@@ -235,23 +256,6 @@ fn event_loop(
                 };
                 robots_w.insert(name.clone(), w);
             }
-            if !send {
-                continue;
-            }
-            let w = &robots_w[name];
-            // flag first, then the pose (robot nodes key everything on the stamp anyway)
-            if let Some(f) = &w.flag {
-                let _ = f.write(Bool { data: *has_part }, Some(ns));
-            }
-            let ps = pose(*pos);
-            if let Some(r) = rec.as_mut() {
-                r.put(
-                    &robot(name, Leaf::HasPart).ros_name(),
-                    &Bool { data: *has_part },
-                );
-                r.put(&robot(name, Leaf::Pose).ros_name(), &ps);
-            }
-            let _ = w.pose.write(ps, Some(ns));
         }
         let ms: Vec<_> = core.env.machines().collect();
         machines_w.retain(|j, _| ms.iter().any(|m| m.id.0 == *j));
@@ -278,22 +282,6 @@ fn event_loop(
                 };
                 machines_w.insert(j, w);
             }
-            if !send {
-                continue;
-            }
-            let w = &machines_w[&j];
-            if let Some(f) = &w.flag {
-                let _ = f.write(Bool { data: m.part_ready }, Some(ns));
-            }
-            let ps = pose(m.centre);
-            if let Some(r) = rec.as_mut() {
-                r.put(
-                    &machine(j, Leaf::PartReady).ros_name(),
-                    &Bool { data: m.part_ready },
-                );
-                r.put(&machine(j, Leaf::Pose).ros_name(), &ps);
-            }
-            let _ = w.pose.write(ps, Some(ns));
         }
         let ss: Vec<_> = core.env.storages().collect();
         storages_w.retain(|k, _| ss.iter().any(|s| s.id.0 == *k));
@@ -312,28 +300,102 @@ fn event_loop(
                 };
                 storages_w.insert(k, w);
             }
-            if send {
-                let ps = pose(s.centre);
-                if let Some(r) = rec.as_mut() {
-                    r.put(&storage(k, Leaf::Pose).ros_name(), &ps);
-                }
-                let _ = storages_w[&k].pose.write(ps, Some(ns));
-            }
         }
         if !send {
-            return Ok(());
+            return Ok(None);
         }
-        let markers = core.markers();
-        let diag = core.diagnostics();
-        let clock = Clock { clock: stamp };
+        Ok(Some(StateFrame {
+            ns,
+            robots: states
+                .iter()
+                .map(|(n, pos, has)| (n.clone(), pose(*pos), *has))
+                .collect(),
+            machines: ms
+                .iter()
+                .map(|m| (m.id.0, pose(m.centre), m.part_ready))
+                .collect(),
+            storages: ss.iter().map(|s| (s.id.0, pose(s.centre))).collect(),
+            markers: core.markers(),
+            diag: core.diagnostics(),
+            clock: Clock { clock: stamp },
+        }))
+    };
+    // An entity removed while its frame was held has no writer any more: skipped.
+    let send_frame = |f: StateFrame,
+                      robots_w: &BTreeMap<String, EntityWriters>,
+                      machines_w: &HashMap<u32, EntityWriters>,
+                      storages_w: &HashMap<u32, EntityWriters>,
+                      rec: &mut Option<Recorder>| {
+        let ns = f.ns;
+        for (name, ps, has_part) in f.robots {
+            let Some(w) = robots_w.get(&name) else {
+                continue;
+            };
+            // flag first, then the pose (robot nodes key everything on the stamp anyway)
+            if let Some(fl) = &w.flag {
+                let _ = fl.write(Bool { data: has_part }, Some(ns));
+            }
+            if let Some(r) = rec.as_mut() {
+                r.put(
+                    &robot(&name, Leaf::HasPart).ros_name(),
+                    &Bool { data: has_part },
+                );
+                r.put(&robot(&name, Leaf::Pose).ros_name(), &ps);
+            }
+            let _ = w.pose.write(ps, Some(ns));
+        }
+        for (j, ps, ready) in f.machines {
+            let Some(w) = machines_w.get(&j) else {
+                continue;
+            };
+            if let Some(fl) = &w.flag {
+                let _ = fl.write(Bool { data: ready }, Some(ns));
+            }
+            if let Some(r) = rec.as_mut() {
+                r.put(
+                    &machine(j, Leaf::PartReady).ros_name(),
+                    &Bool { data: ready },
+                );
+                r.put(&machine(j, Leaf::Pose).ros_name(), &ps);
+            }
+            let _ = w.pose.write(ps, Some(ns));
+        }
+        for (k, ps) in f.storages {
+            let Some(w) = storages_w.get(&k) else {
+                continue;
+            };
+            if let Some(r) = rec.as_mut() {
+                r.put(&storage(k, Leaf::Pose).ros_name(), &ps);
+            }
+            let _ = w.pose.write(ps, Some(ns));
+        }
         if let Some(r) = rec.as_mut() {
-            r.put(topics::MARKERS, &markers);
-            r.put(topics::METRICS, &diag);
-            r.put(topics::CLOCK, &clock);
+            r.put(topics::MARKERS, &f.markers);
+            r.put(topics::METRICS, &f.diag);
+            r.put(topics::CLOCK, &f.clock);
         }
-        let _ = markers_pub.publish(markers);
-        let _ = metrics_pub.publish(diag);
-        let _ = clock_pub.publish(clock);
+        let _ = markers_pub.publish(f.markers);
+        let _ = metrics_pub.publish(f.diag);
+        let _ = clock_pub.publish(f.clock);
+    };
+    // Build the state and publish it now, or hold it (test_state_delay_ms).
+    #[allow(clippy::too_many_arguments)]
+    let publish_state = |core: &Core,
+                         node: &Node,
+                         robots_w: &mut BTreeMap<String, EntityWriters>,
+                         machines_w: &mut HashMap<u32, EntityWriters>,
+                         storages_w: &mut HashMap<u32, EntityWriters>,
+                         rec: &mut Option<Recorder>,
+                         state_q: &mut DelayQueue<StateFrame>,
+                         send: bool|
+     -> anyhow::Result<()> {
+        if let Some(f) = prepare_state(core, node, robots_w, machines_w, storages_w, send)? {
+            if state_q.is_active() {
+                state_q.push(Instant::now(), f);
+            } else {
+                send_frame(f, robots_w, machines_w, storages_w, rec);
+            }
+        }
         Ok(())
     };
 
@@ -374,6 +436,7 @@ fn event_loop(
         &mut machines_w,
         &mut storages_w,
         &mut rec,
+        &mut state_q,
         p.mode == Mode::Realtime,
     )?;
 
@@ -385,8 +448,11 @@ fn event_loop(
         if p.mode == Mode::Realtime {
             deadline = deadline.min(next_tick);
         }
-        if let Some((due, ..)) = delayed.front() {
-            deadline = deadline.min(*due);
+        for due in [delayed.next_due(), state_q.next_due()]
+            .into_iter()
+            .flatten()
+        {
+            deadline = deadline.min(due);
         }
         if let Err(e) = poll.poll(&mut events, Some(deadline.saturating_duration_since(now))) {
             if e.kind() != std::io::ErrorKind::Interrupted {
@@ -403,13 +469,8 @@ fn event_loop(
                         if let Some(r) = rec.as_mut() {
                             r.put(&robot(name, Leaf::CmdVel).ros_name(), &tw);
                         }
-                        if !cmd_delay.is_zero() {
-                            delayed.push_back((
-                                Instant::now() + cmd_delay,
-                                name.clone(),
-                                tw,
-                                stamp_key_info(&info),
-                            ));
+                        if delayed.is_active() {
+                            delayed.push(Instant::now(), (name.clone(), tw, stamp_key_info(&info)));
                             continue;
                         }
                         let o = core.on_cmd(name, &tw, stamp_key_info(&info), t);
@@ -422,8 +483,7 @@ fn event_loop(
                 }
             }
         }
-        while delayed.front().is_some_and(|d| d.0 <= Instant::now()) {
-            let (_, name, tw, stamp) = delayed.pop_front().expect("front exists");
+        while let Some((name, tw, stamp)) = delayed.pop_due(Instant::now()) {
             if let crate::core::CmdOutcome::Spawned(id) = core.on_cmd(&name, &tw, stamp, t) {
                 info!("spawned a body (id {}) for /{name}", id.0);
             }
@@ -501,6 +561,7 @@ fn event_loop(
                         &mut machines_w,
                         &mut storages_w,
                         &mut rec,
+                        &mut state_q,
                         true,
                     )?;
                 }
@@ -522,6 +583,7 @@ fn event_loop(
                             &mut machines_w,
                             &mut storages_w,
                             &mut rec,
+                            &mut state_q,
                             true,
                         )?;
                         core.mark_published(t);
@@ -540,12 +602,17 @@ fn event_loop(
                             &mut machines_w,
                             &mut storages_w,
                             &mut rec,
+                            &mut state_q,
                             true,
                         )?;
                         core.mark_published(t);
                     }
                 }
             }
+        }
+
+        while let Some(f) = state_q.pop_due(Instant::now()) {
+            send_frame(f, &robots_w, &machines_w, &storages_w, &mut rec);
         }
 
         if core.done() {

@@ -62,6 +62,10 @@ pub struct BridgeParams {
     /// Fault injection (tests and bench/faults only): every received cmd_vel reaches the
     /// simulator this many milliseconds late.
     pub test_cmd_delay_ms: f64,
+    /// Fault injection (tests and bench/faults only): every state message the bridge
+    /// publishes (poses, has_part, part_ready, markers, metrics, /clock) goes out this many
+    /// milliseconds after the step that produced it; the step loop does not wait.
+    pub test_state_delay_ms: f64,
 }
 
 impl Default for BridgeParams {
@@ -88,6 +92,7 @@ impl Default for BridgeParams {
             record: None,
             stdin_commands: false,
             test_cmd_delay_ms: 0.0,
+            test_state_delay_ms: 0.0,
         }
     }
 }
@@ -185,12 +190,16 @@ where
                 ParamValue::Str(s) => p.record = Some(PathBuf::from(s)),
                 other => return Err(bad(n, format!("expected a directory, got {other:?}"))),
             },
-            "test_cmd_delay_ms" => {
+            "test_cmd_delay_ms" | "test_state_delay_ms" => {
                 let x = num(n, &v)?;
                 if !(x.is_finite() && (0.0..=10_000.0).contains(&x)) {
                     return Err(bad(n, format!("must be in [0, 10000] ms, got {x}")));
                 }
-                p.test_cmd_delay_ms = x;
+                if n == "test_cmd_delay_ms" {
+                    p.test_cmd_delay_ms = x;
+                } else {
+                    p.test_state_delay_ms = x;
+                }
             }
             "stdin_commands" => match v {
                 ParamValue::Bool(b) => p.stdin_commands = b,
@@ -231,6 +240,10 @@ mod tests {
                 "-p",
                 "max_steps:=200",
                 "-p",
+                "test_state_delay_ms:=50",
+                "-p",
+                "test_cmd_delay_ms:=200.5",
+                "-p",
                 "bogus:=1",
             ],
             Some("7"),
@@ -244,6 +257,8 @@ mod tests {
         assert!(!p.spawn_initial);
         assert_eq!(p.max_steps, 200);
         assert_eq!(p.domain_id, 7);
+        assert_eq!(p.test_state_delay_ms, 50.0);
+        assert_eq!(p.test_cmd_delay_ms, 200.5);
         assert_eq!(w.len(), 1);
     }
 
@@ -255,6 +270,9 @@ mod tests {
             "rate_hz:=0",
             "seed:=-1",
             "spawn_initial:=maybe",
+            "test_state_delay_ms:=-1",
+            "test_state_delay_ms:=20000",
+            "test_cmd_delay_ms:=nan",
         ] {
             assert!(parse(["--ros-args", "-p", bad], None).is_err(), "{bad}");
         }
