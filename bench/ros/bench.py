@@ -55,7 +55,8 @@ def latency(a):
     for rep in range(a.reps):
         for name, pol in ctrls:
             la0 = loadavg()
-            cmd = [os.path.join(REL, "ros_bench"), "latency", "--robot-node", os.path.join(REL, "robot_node"),
+            rn = os.path.join(ROOT, a.robot_node) if a.robot_node else os.path.join(REL, "robot_node")
+            cmd = [os.path.join(REL, "ros_bench"), "latency", "--robot-node", rn,
                    "--n", str(a.n), "--interval-ms", str(a.interval_ms), "--domain", str(150 + rep * 4 + len(name) % 4)]
             if pol:
                 cmd += ["--policy", pol]
@@ -67,9 +68,10 @@ def latency(a):
                 continue
             v = json.loads(line[-1])
             v.update(kind=name, rep=rep, interval_ms=a.interval_ms, loadavg_before=la0, loadavg_after=loadavg(),
+                     variant=a.variant or None, robot_node=os.path.relpath(rn, ROOT),
                      time=time.strftime("%Y-%m-%dT%H:%M:%S"))
             append("latency.jsonl", v)
-            print(f"latency {name:6} rep {rep} int {a.interval_ms} ms: state->cmd p50 {v['state_first_write_to_cmd_us']['p50']:.0f} us "
+            print(f"latency {name:6} {a.variant or ''} rep {rep} int {a.interval_ms} ms: state->cmd p50 {v['state_first_write_to_cmd_us']['p50']:.0f} us "
                   f"p99 {v['state_first_write_to_cmd_us']['p99']:.0f} us | bare RTT p50 {v['bare_round_trip_us']['p50']:.0f} us "
                   f"p99 {v['bare_round_trip_us']['p99']:.0f} us | load {la0[0]:.2f}", flush=True)
 
@@ -77,12 +79,14 @@ def latency(a):
 STATS_PERIOD = 5  # periodic stats lines: missed ticks after the start-up phase
 STEADY_AFTER = 10  # s of robot uptime: the "steady" counts start at the first stats line past this
 
-SETUPS = {5: "5.4_2", 6: "6.4_2", 10: "10.6_4", 20: "20.12_4", 30: "30.18_4", 40: "40.24_4", 50: "50.16_4", 100: "100.16_2"}
+SETUPS = {5: "5.4_2", 6: "6.4_2", 10: "10.6_4", 20: "20.12_4", 30: "30.18_4", 40: "40.24_4", 50: "50.16_4", 100: "100.16_2", 200: "200.16_2"}
 
 
-def fleet_run(n, secs, warm, policy, domain, tag, multi=False):
+def fleet_run(n, secs, warm, policy, domain, tag, multi=False, robot_node=None, variant=None):
     """n robots at 10 Hz on a realtime sim_bridge: one robot_node process per robot, or
-    (multi) one robot_node process hosting all n robots (-p robots:=robot_0..n-1)."""
+    (multi) one robot_node process hosting all n robots (-p robots:=robot_0..n-1).
+    robot_node: the binary (default target/release/robot_node); variant: its label."""
+    robot_node = robot_node or os.path.join(REL, "robot_node")
     setup = SETUPS.get(n, f"{n}.{max(2, n // 6)}_{max(2, n // 25)}")
     logdir = os.path.join(OUT, "logs", f"fleet-{tag}")
     os.makedirs(logdir, exist_ok=True)
@@ -90,7 +94,7 @@ def fleet_run(n, secs, warm, policy, domain, tag, multi=False):
     groups = [["robot_0..%d" % (n - 1)]] if multi else [[f"__ns:=/robot_{i}"] for i in range(n)]
     nodes = []
     for gi, g in enumerate(groups):
-        args = [os.path.join(REL, "robot_node"), "--ros-args"]
+        args = [robot_node, "--ros-args"]
         if multi:
             args += ["-p", f"robots:={g[0]}"]
         else:
@@ -169,7 +173,8 @@ def fleet_run(n, secs, warm, policy, domain, tag, multi=False):
     cpus = [pct(pid) for pid in pids]
     cpus = [c for c in cpus if c is not None]
     per_robot_cpu = [c / (n if multi else 1) for c in cpus]
-    return dict(robots_n=n, multi=multi, processes=len(nodes), setup=setup, secs=secs, cpu_window_s=dt,
+    return dict(robots_n=n, multi=multi, variant=variant, robot_node=os.path.relpath(robot_node, ROOT),
+                processes=len(nodes), setup=setup, secs=secs, cpu_window_s=dt,
                 policy=policy, alive_at_end=alive, killed=killed,
                 finals=len(fin), ticks=ticks, ticks_missed=missed,
                 missed_pct=missed / max(1, ticks + missed) * 100, missed_pct_worst_node=max(per_node) if per_node else None,
@@ -187,21 +192,33 @@ def fleet_run(n, secs, warm, policy, domain, tag, multi=False):
 
 
 def fleet(a):
+    # variants: label=binary pairs, run side by side (same rep, same size, one after the
+    # other) so that both see the same background load
+    variants = [(None, None)]
+    if a.variants:
+        variants = [tuple(v.split("=", 1)) for v in a.variants.split(",")]
     for rep in range(a.reps):
         for n in [int(x) for x in a.sizes.split(",")]:
-            tag = f"{n}-{'multi' if a.multi else 'procs'}-r{rep}"
-            v = fleet_run(n, a.secs, a.warm, a.policy, 170 + rep * 8 + n % 8 + (40 if a.multi else 0), tag, a.multi)
-            v["rep"] = rep
-            append("fleet.jsonl", v)
-            f = lambda x, d=1: "-" if x is None else f"{x:.{d}f}"
-            print(f"fleet {n:3} {'1 proc' if a.multi else 'procs '} rep {rep}: missed {v['ticks_missed']}/{v['ticks']} "
-                  f"({f(v['missed_pct'], 2)}%, worst robot {f(v['missed_pct_worst_node'], 2)}%) after {STEADY_AFTER} s: "
-                  f"{v['steady_missed']}/{v['steady_ticks']} ({f(v['steady_missed_pct'], 2)}%, worst {f(v['steady_missed_pct_worst'], 2)}%, "
-                  f"{v['steady_robots']} robots) late_max {v['tick_late_max_us']} us | "
-                  f"cpu/robot {f(v['cpu_pct_per_robot_median'])}% nodes {f(v['cpu_pct_nodes_total'], 0)}% bridge "
-                  f"{f(v['cpu_pct_bridge'], 0)}% | rss/proc {v['rss_kb_per_process_median']} kB | finals {v['finals']}/{n} "
-                  f"subs {v['subscriptions_median']} own_stale {v['zero_own_stale']} cmds {v['commands']} | "
-                  f"load {v['loadavg_before'][0]:.2f}->{v['loadavg_after'][0]:.2f}", flush=True)
+            for vi, (label, binary) in enumerate(variants):
+                vtag = f"-{label}" if label else ""
+                tag = f"{n}-{'multi' if a.multi else 'procs'}{vtag}-r{rep}"
+                # ROS_DOMAIN_ID must stay <= 232
+                domain = (100 + vi * 30 if a.multi else 170) + rep * 8 + n % 8
+                v = fleet_run(n, a.secs, a.warm, a.policy, domain, tag, a.multi,
+                              os.path.join(ROOT, binary) if binary else None, label)
+                v["rep"] = rep
+                append("fleet.jsonl", v)
+                f = lambda x, d=1: "-" if x is None else f"{x:.{d}f}"
+                bm = v["bridge_metrics"] or {}
+                print(f"fleet {n:3} {'1 proc' if a.multi else 'procs '} {label or ''} rep {rep}: missed {v['ticks_missed']}/{v['ticks']} "
+                      f"({f(v['missed_pct'], 2)}%, worst robot {f(v['missed_pct_worst_node'], 2)}%) after {STEADY_AFTER} s: "
+                      f"{v['steady_missed']}/{v['steady_ticks']} ({f(v['steady_missed_pct'], 2)}%, worst {f(v['steady_missed_pct_worst'], 2)}%, "
+                      f"{v['steady_robots']} robots) late_max {v['tick_late_max_us']} us | "
+                      f"cpu/robot {f(v['cpu_pct_per_robot_median'])}% nodes {f(v['cpu_pct_nodes_total'], 0)}% bridge "
+                      f"{f(v['cpu_pct_bridge'], 0)}% | rss/proc {v['rss_kb_per_process_median']} kB | finals {v['finals']}/{n} "
+                      f"subs {v['subscriptions_median']} own_stale {v['zero_own_stale']} cmds {v['commands']} | "
+                      f"bridge robots {bm.get('robots')} step {bm.get('step')} parts {bm.get('parts_delivered')} | "
+                      f"load {v['loadavg_before'][0]:.2f}->{v['loadavg_after'][0]:.2f}", flush=True)
 
 
 def main():
@@ -216,6 +233,8 @@ def main():
     l.add_argument("--machines", type=int, default=4)
     l.add_argument("--storages", type=int, default=2)
     l.add_argument("--greedy-only", action="store_true")
+    l.add_argument("--robot-node", default="", help="robot_node binary (path from the repo root)")
+    l.add_argument("--variant", default="", help="label of that binary in the results")
     f = sub.add_parser("fleet")
     f.add_argument("--sizes", default="5,10,20")
     f.add_argument("--reps", type=int, default=3)
@@ -223,6 +242,8 @@ def main():
     f.add_argument("--warm", type=float, default=5)
     f.add_argument("--policy", default="")
     f.add_argument("--multi", action="store_true", help="all robots in one robot_node process")
+    f.add_argument("--variants", default="",
+                   help="label=binary[,label=binary...] (paths from the repo root), run side by side")
     a = ap.parse_args()
     {"latency": latency, "fleet": fleet}[a.cmd](a)
 

@@ -65,8 +65,9 @@ pub struct Params {
     /// Also print the counters as one JSON object per line on stdout (every stats period
     /// and on exit, with `"final": true`), for benchmarks and launchers.
     pub stats_json: bool,
-    /// Multi-robot mode: these robots (ids such as `robot_3`) in one process, sharing one
-    /// DDS context, one node and one event-loop thread each, in namespace `/<robot>`.
+    /// Multi-robot mode: these robots (ids such as `robot_3`) in one process: one DDS
+    /// context, one node (in `namespace`), one reader per input topic fanned out to every
+    /// hosted robot, one `cmd_vel` writer and controller per robot, one event loop.
     /// Empty: one robot, identified by the namespace.
     pub robots: Vec<String>,
 }

@@ -6,10 +6,12 @@
 //! - [`controller`]: the [`controller::Controller`] trait (seam for the learned policy)
 //!   and the scripted greedy controller;
 //! - [`tick`]: one control step, DDS-free;
-//! - [`node`]: the ros2-client node (discovery, subscriptions, timing, cmd_vel).
+//! - [`fanout`]: one received sample to every robot a process hosts, DDS-free;
+//! - [`node`]: the ros2-client node (discovery, one reader per topic, timing, cmd_vel).
 
 pub mod args;
 pub mod controller;
+pub mod fanout;
 pub mod node;
 pub mod tick;
 pub mod world;

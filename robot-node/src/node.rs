@@ -1,10 +1,14 @@
-//! The DDS side: one ros2-client node per robot. Subscribes to its own pose/has_part,
-//! discovers machines, storages and peers from topic discovery, ticks the [`Brain`] at the
-//! control rate (wall clock, or `/clock` with `use_sim_time`) and publishes `cmd_vel`.
+//! The DDS side: one ros2-client node per process, hosting one robot (`-r __ns:=/robot_3`)
+//! or several (`-p robots:=robot_0..99`). Subscribes once to each hosted robot's own
+//! pose/has_part, discovers machines, storages and peers from topic discovery (one reader
+//! per topic, whatever the number of hosted robots; samples fanned out to every hosted
+//! robot's world by [`crate::fanout`]), ticks each robot's [`Brain`] at the control rate
+//! (wall clock, or `/clock` with `use_sim_time`) and publishes each robot's `cmd_vel`.
 //!
-//! Single-threaded event loop on a mio 1 `Poll` (every subscription is a mio source);
-//! the ros2-client spinner (graph events, parameters, rosout discovery) runs on a
-//! helper thread with a smol executor.
+//! Single-threaded event loop on a mio 1 `Poll` (every subscription is a mio source;
+//! readers are drained when signalled, plus a sweep of all every 100 ms); the ros2-client
+//! spinner (graph events, parameters, rosout discovery) runs on a helper thread with a
+//! smol executor.
 
 use std::collections::HashSet;
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -12,7 +16,7 @@ use std::time::{Duration, Instant};
 
 use anyhow::{anyhow, Context as _};
 use ros2_client::dds::rustdds::mio1::{Events, Interest, Poll, Token};
-use ros2_client::dds::{Context, ContextOptions, Node, Subscription};
+use ros2_client::dds::{Context, ContextOptions, Node, NodeLoggingHandle, Subscription};
 use ros2_client::log::LogLevel;
 use ros2_client::{rosout, Name, NodeName, NodeOptions};
 use tracing::{debug, info, warn};
@@ -22,8 +26,9 @@ use msgs::{Bool, Clock, EntityTopic, PoseStamped, Profile, RosMessage, Twist};
 
 use crate::args::{ControllerKind, Params};
 use crate::controller::{Controller, GreedyController, PolicyController};
-use crate::tick::{Brain, Outcome};
-use crate::world::{Accepted, Counters, DropReason, World, WorldConfig, WriterId};
+use crate::fanout::{self, Incoming};
+use crate::tick::{Brain, Outcome, TickResult};
+use crate::world::{Counters, DropReason, World, WorldConfig, WriterId};
 use msgs::dds::{stamp_key_info, StampedWriter};
 use obs::greedy::GreedyParams;
 
@@ -102,78 +107,46 @@ fn subscribe<M: RosMessage>(
 
 /// Run the node until `stop` is set. Returns the final counters (summed over robots in
 /// multi-robot mode).
+///
+/// One robot (`-r __ns:=/robot_3`) or several (`-p robots:=robot_0,robot_1,...`): either
+/// way one DDS context, one ros2-client node (namespace `/robot_3`, or the given namespace
+/// in multi-robot mode), one reader per input topic whose samples are fanned out to every
+/// hosted robot ([`crate::fanout`]), one `cmd_vel` writer per robot, one event loop.
 pub fn run(p: &Params, stop: &AtomicBool) -> anyhow::Result<Counters> {
-    if !p.robots.is_empty() {
-        return run_many(p, stop);
-    }
-    let (controller, k_speed) = make_controller(p)?;
-    let me = p.robot_id();
-    if me.is_empty() {
-        return Err(anyhow!(
-            "no robot namespace: start with --ros-args -r __ns:=/robot_N"
-        ));
-    }
-    let ctx = Context::with_options(ContextOptions::new().domain_id(p.domain_id))
-        .map_err(dds_err("DDS context"))?;
-    run_on(&ctx, p, stop, controller, k_speed)
-}
-
-/// Several robots in one process (`-p robots:=robot_0,robot_1,...`): one DDS context (one
-/// participant: one set of RustDDS threads and sockets) shared by one node per robot, in
-/// namespace `/<robot>`; each robot runs the single-robot event loop on its own thread.
-/// Every robot still has its own subscriptions and controller.
-fn run_many(p: &Params, stop: &AtomicBool) -> anyhow::Result<Counters> {
-    let mut per = Vec::with_capacity(p.robots.len());
-    for name in &p.robots {
-        let mut q = p.clone();
-        q.namespace = format!("/{name}");
-        q.robots = Vec::new();
-        let (controller, k_speed) = make_controller(&q).with_context(|| format!("robot {name}"))?;
-        per.push((q, controller, k_speed));
+    let multi = !p.robots.is_empty();
+    let names: Vec<String> = if multi {
+        p.robots.clone()
+    } else {
+        let me = p.robot_id();
+        if me.is_empty() {
+            return Err(anyhow!(
+                "no robot namespace: start with --ros-args -r __ns:=/robot_N"
+            ));
+        }
+        vec![me]
+    };
+    let mut robots = Vec::with_capacity(names.len());
+    for name in names {
+        let (controller, k_speed) = if multi {
+            let mut q = p.clone();
+            q.namespace = format!("/{name}");
+            q.robots = Vec::new();
+            make_controller(&q).with_context(|| format!("robot {name}"))?
+        } else {
+            make_controller(p)?
+        };
+        robots.push((name, controller, k_speed));
     }
     let ctx = Context::with_options(ContextOptions::new().domain_id(p.domain_id))
         .map_err(dds_err("DDS context"))?;
-    info!("{} robots in one process", per.len());
-    let results: Vec<anyhow::Result<Counters>> = std::thread::scope(|s| {
-        let handles: Vec<_> = per
-            .into_iter()
-            .enumerate()
-            .map(|(i, (q, controller, k_speed))| {
-                let ctx = &ctx;
-                std::thread::Builder::new()
-                    .name(q.robot_id())
-                    .spawn_scoped(s, move || {
-                        // staggered start: RustDDS queues entity creation on a bounded
-                        // channel, which overflows when all robots create theirs at once
-                        let until = Instant::now() + STAGGER * i as u32;
-                        while Instant::now() < until && !stop.load(Ordering::SeqCst) {
-                            std::thread::sleep(Duration::from_millis(10));
-                        }
-                        run_on(ctx, &q, stop, controller, k_speed)
-                            .with_context(|| format!("robot {}", q.robot_id()))
-                    })
-            })
-            .collect();
-        handles
-            .into_iter()
-            .map(|h| match h {
-                Ok(h) => h
-                    .join()
-                    .unwrap_or_else(|_| Err(anyhow!("robot thread panicked"))),
-                Err(e) => Err(anyhow!("cannot start a robot thread: {e}")),
-            })
-            .collect()
-    });
-    let mut total = Counters::default();
-    for r in results {
-        total.add(&r?);
+    if multi {
+        info!(
+            "{} robots in one process: one reader per topic, shared",
+            robots.len()
+        );
     }
-    info!("final counters (all robots): {total}");
-    Ok(total)
+    run_on(&ctx, p, stop, robots, multi)
 }
-
-/// Multi-robot mode: delay between the starts of two robots.
-const STAGGER: Duration = Duration::from_millis(100);
 
 /// Retry a DDS set-up step that can fail transiently (RustDDS reports a full internal
 /// channel as a poisoned entity when many entities are created at once): 40 attempts,
@@ -199,15 +172,17 @@ fn retry<T>(
     }
 }
 
-/// One robot's node on a (possibly shared) DDS context, until `stop` is set.
+/// A hosted robot (name, controller, its k_speed).
+type RobotSpec = (String, Box<dyn Controller>, f64);
+
+/// The node on a DDS context, until `stop` is set.
 fn run_on(
     ctx: &Context,
     p: &Params,
     stop: &AtomicBool,
-    controller: Box<dyn Controller>,
-    k_speed: f64,
+    robots: Vec<RobotSpec>,
+    multi: bool,
 ) -> anyhow::Result<Counters> {
-    let me = p.robot_id();
     let (mut node, spinner) = retry("node", stop, || {
         let mut node = ctx
             .new_node(
@@ -218,15 +193,18 @@ fn run_on(
         let spinner = node.spinner().map_err(dds_err("spinner"))?;
         Ok((node, spinner))
     })?;
-    let spin_thread = std::thread::Builder::new()
-        .name(format!("spin-{me}"))
-        .spawn(move || {
-            if let Err(e) = smol::block_on(spinner.spin()) {
-                warn!("spinner stopped with error: {e:?}");
-            }
-        })?;
+    let spin_name = if multi {
+        "spin".to_string()
+    } else {
+        format!("spin-{}", p.robot_id())
+    };
+    let spin_thread = std::thread::Builder::new().name(spin_name).spawn(move || {
+        if let Err(e) = smol::block_on(spinner.spin()) {
+            warn!("spinner stopped with error: {e:?}");
+        }
+    })?;
 
-    let result = event_loop(p, stop, ctx, &mut node, controller, k_speed, &me);
+    let result = event_loop(p, stop, ctx, &mut node, robots, multi);
     drop(node); // signals the spinner to stop
     if spin_thread.join().is_err() {
         warn!("spinner thread panicked");
@@ -234,38 +212,82 @@ fn run_on(
     result
 }
 
+/// One hosted robot: its brain (world model, controller, counters), its `cmd_vel` writer
+/// and its timing state.
+struct Hosted {
+    me: String,
+    /// Prefix of its log lines: empty with one robot per process, `robot_3: ` otherwise.
+    tag: String,
+    brain: Brain,
+    cmd: StampedWriter<Twist>,
+    /// Wall clock: when its next tick is due.
+    next_tick: Instant,
+    last_outcome: Option<Outcome>,
+    /// Lockstep: the last state acted on, and the state waited for (since when).
+    last_acted: Option<i64>,
+    pending: Option<(i64, Instant)>,
+}
+
+impl Hosted {
+    fn publish(&mut self, v: [f64; 2], stamp: Option<i64>) {
+        if self
+            .cmd
+            .write(Twist::planar(v[0], v[1]), stamp.map(|us| us * 1000))
+            .is_err()
+        {
+            self.brain.counters.publish_errors += 1;
+        }
+    }
+}
+
+/// Readers are drained when their mio event fires, when a drain stopped at its bound, and
+/// all of them at this period (a safety net: a missed wake-up costs at most this long).
+const SWEEP_PERIOD: Duration = Duration::from_millis(100);
+
 fn event_loop(
     p: &Params,
     stop: &AtomicBool,
     ctx: &Context,
     node: &mut Node,
-    controller: Box<dyn Controller>,
-    k_speed: f64,
-    me: &str,
+    robots: Vec<RobotSpec>,
+    multi: bool,
 ) -> anyhow::Result<Counters> {
-    let world = World::new(
-        me,
-        WorldConfig {
-            stale_timeout_s: p.stale_timeout_s,
-            static_stale_timeout_s: p.static_stale_timeout_s,
-            room: msgs::RoomBounds {
-                half_extent: msgs::validate::ROOM_HALF_EXTENT,
-                margin: p.room_margin,
-            },
+    let wcfg = WorldConfig {
+        stale_timeout_s: p.stale_timeout_s,
+        static_stale_timeout_s: p.static_stale_timeout_s,
+        room: msgs::RoomBounds {
+            half_extent: msgs::validate::ROOM_HALF_EXTENT,
+            margin: p.room_margin,
         },
-    );
-    let mut brain = Brain::new(world, controller, k_speed);
-
+    };
     // cmd_vel carries the stamp of the state it answers as its DDS source timestamp
-    // (lockstep); otherwise the wall clock, like any ROS 2 publisher.
-    let cmd_name = topics::robot(me, Leaf::CmdVel).ros_name();
-    let cmd_pub: StampedWriter<Twist> = retry("cmd_vel writer", stop, || {
-        StampedWriter::new(ctx, node, &cmd_name, Profile::RobotStream)
-            .map_err(|e| anyhow!("cmd_vel writer: {e}"))
-    })?;
+    // (lockstep); otherwise the wall clock, like any ROS 2 publisher. One writer per robot.
+    let mut hosted: Vec<Hosted> = Vec::with_capacity(robots.len());
+    let placeholder = Instant::now();
+    for (me, controller, k_speed) in robots {
+        let cmd_name = topics::robot(&me, Leaf::CmdVel).ros_name();
+        let cmd: StampedWriter<Twist> = retry("cmd_vel writer", stop, || {
+            StampedWriter::new(ctx, node, &cmd_name, Profile::RobotStream)
+                .map_err(|e| anyhow!("cmd_vel writer: {e}"))
+        })?;
+        hosted.push(Hosted {
+            tag: if multi {
+                format!("{me}: ")
+            } else {
+                String::new()
+            },
+            brain: Brain::new(World::new(&me, wcfg), controller, k_speed),
+            me,
+            cmd,
+            next_tick: placeholder,
+            last_outcome: None,
+            last_acted: None,
+            pending: None,
+        });
+    }
 
     let mut poll = Poll::new().context("mio poll")?;
-    let mut events = Events::with_capacity(256);
+    let mut events = Events::with_capacity(1024);
     let mut subs: Vec<Sub> = Vec::new();
     let mut known: HashSet<EntityTopic> = HashSet::new();
 
@@ -299,12 +321,18 @@ fn event_loop(
         Ok(())
     };
 
-    for leaf in [Leaf::Pose, Leaf::HasPart] {
-        let t = topics::robot(me, leaf);
+    // every hosted robot's own topics, read once for all (another hosted robot's own
+    // topics are a peer's for the rest)
+    let own: Vec<EntityTopic> = hosted
+        .iter()
+        .flat_map(|h| [Leaf::Pose, Leaf::HasPart].map(|leaf| topics::robot(&h.me, leaf)))
+        .collect();
+    for t in own {
         known.insert(t.clone());
         retry("own subscription", stop, || {
             add_sub(node, &poll, &mut subs, t.clone())
         })?;
+        fanout::touch(hosted.iter_mut().map(|h| &mut h.brain), &t);
     }
     let mut clock_sub: Option<Subscription<Clock>> = if p.use_sim_time {
         let mut s = subscribe::<Clock>(node, topics::CLOCK, Profile::Clock)?;
@@ -316,13 +344,24 @@ fn event_loop(
     };
 
     let log = node.logging_handle();
+    let who = if multi {
+        format!(
+            "{} hosting {} robots ({} .. {})",
+            p.fully_qualified_name(),
+            hosted.len(),
+            hosted[0].me,
+            hosted[hosted.len() - 1].me
+        )
+    } else {
+        p.fully_qualified_name()
+    };
     rosout!(
         log,
         LogLevel::Info,
         "robot_node {} up: domain {}, controller {}, {} Hz ({}), k_speed {} m/s, stale {} s / static {} s",
-        p.fully_qualified_name(),
+        who,
         p.domain_id,
-        brain.controller.name(),
+        hosted[0].brain.controller.name(),
         p.control_rate_hz,
         if p.use_sim_time { "sim time from /clock" } else { "wall clock" },
         p.k_speed,
@@ -333,28 +372,23 @@ fn event_loop(
     let t0 = Instant::now();
     let now_s = |t0: Instant| t0.elapsed().as_secs_f64();
     let period = Duration::from_secs_f64(1.0 / p.control_rate_hz);
-    let mut next_tick = t0;
+    let n = hosted.len();
+    for (i, h) in hosted.iter_mut().enumerate() {
+        h.next_tick = t0 + fanout::tick_offset(i, n, period);
+    }
     let mut next_discovery = t0;
+    let mut next_sweep = t0;
     let stats_period = Duration::from_secs_f64(p.stats_period_s);
     let mut next_stats = t0 + stats_period;
-    let mut last_outcome: Option<Outcome> = None;
     let mut wrong_type_warned: HashSet<String> = HashSet::new();
     let mut sub_failed_warned: HashSet<EntityTopic> = HashSet::new();
+    // readers to drain: signalled by mio, or left with samples by a bounded drain
+    let mut todo: Vec<usize> = Vec::new();
+    let mut leftover: Vec<usize> = Vec::new();
+    let mut drops_seen: u64 = 0;
     // sim time: last tick index = floor(t * rate), last clock value
     let mut sim_last_index: Option<i64> = None;
     let mut sim_last_t: f64 = f64::NEG_INFINITY;
-
-    let publish = |brain: &mut Brain, v: [f64; 2], stamp: Option<i64>| {
-        if cmd_pub
-            .write(Twist::planar(v[0], v[1]), stamp.map(|us| us * 1000))
-            .is_err()
-        {
-            brain.counters.publish_errors += 1;
-        }
-    };
-    // lockstep: the last state acted on, and the state waited for (since when)
-    let mut last_acted: Option<i64> = None;
-    let mut pending: Option<(i64, Instant)> = None;
     let lockstep_wait = Duration::from_secs_f64(p.lockstep_wait_s);
 
     while !stop.load(Ordering::SeqCst) {
@@ -362,25 +396,50 @@ fn event_loop(
         let now = Instant::now();
         let mut deadline = next_discovery
             .min(next_stats)
+            .min(next_sweep)
             .min(now + Duration::from_millis(100));
-        if clock_sub.is_none() {
-            deadline = deadline.min(next_tick);
+        for h in &hosted {
+            if clock_sub.is_none() {
+                deadline = deadline.min(h.next_tick);
+            }
+            if let Some((_, since)) = h.pending {
+                deadline = deadline.min(since + lockstep_wait);
+            }
         }
-        if let Some((_, since)) = pending {
-            deadline = deadline.min(since + lockstep_wait);
-        }
-        let timeout = deadline.saturating_duration_since(now);
+        let timeout = if leftover.is_empty() {
+            deadline.saturating_duration_since(now)
+        } else {
+            Duration::ZERO
+        };
         if let Err(e) = poll.poll(&mut events, Some(timeout)) {
             if e.kind() != std::io::ErrorKind::Interrupted {
                 return Err(e).context("mio poll");
             }
         }
 
-        // ---- drain every subscription (mio is edge triggered; draining all is cheap
-        //      and avoids missing a wake-up)
+        // ---- drain the readers that have data (each sample once, fanned out to every
+        //      hosted robot); every reader at each sweep
         let t = now_s(t0);
-        for sub in &subs {
-            drain(sub, &mut brain, t);
+        todo.clear();
+        if Instant::now() >= next_sweep {
+            next_sweep = Instant::now() + SWEEP_PERIOD;
+            todo.extend(0..subs.len());
+            leftover.clear();
+        } else {
+            todo.append(&mut leftover);
+            todo.extend(
+                events
+                    .iter()
+                    .map(|e| e.token().0)
+                    .filter(|&i| i < subs.len()),
+            );
+            todo.sort_unstable();
+            todo.dedup();
+        }
+        for &i in &todo {
+            if drain(&subs[i], &mut hosted, t, &mut drops_seen) {
+                leftover.push(i);
+            }
         }
 
         // ---- discovery
@@ -407,8 +466,9 @@ fn event_loop(
                 known.insert(topic.clone());
                 match add_sub(node, &poll, &mut subs, topic.clone()) {
                     Ok(()) => {
-                        brain.world.touch(&topic.entity);
-                        brain.counters.subscriptions = subs.len() as u64;
+                        fanout::touch(hosted.iter_mut().map(|h| &mut h.brain), &topic);
+                        // a new reader may hold samples before its first event is seen
+                        leftover.push(subs.len() - 1);
                         info!("discovered {}", topic.ros_name());
                     }
                     Err(e) => {
@@ -424,7 +484,9 @@ fn event_loop(
                     }
                 }
             }
-            brain.counters.subscriptions = subs.len() as u64;
+            for h in hosted.iter_mut() {
+                h.brain.counters.subscriptions = subs.len() as u64;
+            }
         }
 
         // ---- lockstep: act once per simulator state (docs/adr/0003-lockstep.md)
@@ -432,157 +494,118 @@ fn event_loop(
             if let Some(clock) = clock_sub.as_ref() {
                 while let Ok(Some(_)) = clock.take() {} // /clock is not used in lockstep
             }
-            if let Some(s) = brain.world.own_pose_stamp() {
-                if last_acted.is_some_and(|l| s < l) {
-                    info!("sim time went back: resetting controller");
-                    brain.reset();
-                    last_acted = None;
-                    pending = None;
-                }
-                if last_acted.is_none_or(|l| s > l) {
-                    let since = match pending {
-                        Some((ps, since)) if ps == s => since,
-                        _ => {
-                            let now = Instant::now();
-                            pending = Some((s, now));
-                            now
-                        }
-                    };
-                    let missing = brain.world.lockstep_missing(s, last_acted, now_s(t0));
-                    let timed_out = since.elapsed() >= lockstep_wait;
-                    if missing == Some(0) || timed_out {
-                        if missing != Some(0) {
-                            brain.counters.lockstep_wait_timeouts += 1;
-                            debug!("lockstep: acting on {s} us with {missing:?} entities missing");
-                        }
-                        let r = brain.tick_lockstep(s);
-                        publish(&mut brain, r.velocity, Some(s));
-                        last_acted = Some(s);
-                        pending = None;
-                        if last_outcome
-                            .as_ref()
-                            .is_none_or(|l| !l.same_kind(&r.outcome))
-                        {
-                            match &r.outcome {
-                                Outcome::Command => rosout!(
-                                    log,
-                                    LogLevel::Info,
-                                    "controlling (lockstep): observation counts {:?}",
-                                    r.counts
-                                ),
-                                other => rosout!(
-                                    log,
-                                    LogLevel::Warn,
-                                    "commanding zero velocity: {other:?}"
-                                ),
-                            }
-                        }
-                        last_outcome = Some(r.outcome);
-                    }
-                }
+            for h in hosted.iter_mut() {
+                lockstep_step(h, &log, lockstep_wait, now_s(t0));
             }
         }
 
         // ---- tick
-        let due = if p.lockstep {
-            false
+        if p.lockstep {
+            // acting happened above
         } else if let Some(clock) = clock_sub.as_ref() {
             let mut latest: Option<f64> = None;
+            let mut undecodable = 0u64;
             loop {
                 match clock.take() {
                     Ok(Some((c, _))) => latest = Some(c.clock.as_secs_f64()),
                     Ok(None) => break,
                     Err(e) => {
                         debug!("dropped /clock sample: {e:?}");
-                        brain.counters.drop(DropReason::Decode);
+                        undecodable += 1;
                     }
                 }
             }
-            match latest {
-                Some(st) => {
-                    if st + 1e-9 < sim_last_t {
-                        info!("sim time went back ({sim_last_t} -> {st}): resetting controller");
-                        brain.reset();
-                        sim_last_index = None;
+            for h in hosted.iter_mut() {
+                for _ in 0..undecodable {
+                    h.brain.counters.drop(DropReason::Decode);
+                }
+            }
+            if let Some(st) = latest {
+                let went_back = st + 1e-9 < sim_last_t;
+                if went_back {
+                    info!("sim time went back ({sim_last_t} -> {st}): resetting controller");
+                    sim_last_index = None;
+                }
+                sim_last_t = st;
+                let idx = (st * p.control_rate_hz + 1e-6).floor() as i64;
+                let skipped = match sim_last_index {
+                    Some(l) if idx > l + 1 => (idx - l - 1) as u64,
+                    _ => 0,
+                };
+                let due = sim_last_index.is_none_or(|l| idx > l);
+                if due {
+                    sim_last_index = Some(idx);
+                }
+                let now = now_s(t0);
+                for h in hosted.iter_mut() {
+                    if went_back {
+                        h.brain.reset();
                     }
-                    sim_last_t = st;
-                    let idx = (st * p.control_rate_hz + 1e-6).floor() as i64;
-                    if let Some(l) = sim_last_index {
-                        if idx > l + 1 {
-                            brain.counters.ticks_missed += (idx - l - 1) as u64;
-                        }
-                    }
-                    if sim_last_index.is_none_or(|l| idx > l) {
-                        sim_last_index = Some(idx);
-                        true
-                    } else {
-                        false
+                    h.brain.counters.ticks_missed += skipped;
+                    if due {
+                        tick_now(h, &log, now);
                     }
                 }
-                None => false,
             }
         } else {
-            let now = Instant::now();
-            if now >= next_tick {
-                let late = now - next_tick;
-                brain.counters.tick_late_max_us =
-                    brain.counters.tick_late_max_us.max(late.as_micros() as u64);
+            for h in hosted.iter_mut() {
+                let now = Instant::now();
+                if now < h.next_tick {
+                    continue;
+                }
+                let late = now - h.next_tick;
+                let c = &mut h.brain.counters;
+                c.tick_late_max_us = c.tick_late_max_us.max(late.as_micros() as u64);
                 if late > period {
                     // woke more than one period late: the skipped periods are missed ticks
-                    brain.counters.ticks_missed +=
+                    c.ticks_missed +=
                         (late.as_secs_f64() / period.as_secs_f64()).floor().max(1.0) as u64;
                 }
-                next_tick += period;
-                if next_tick < now {
-                    next_tick = now + period; // overrun: skip, do not burst
+                h.next_tick += period;
+                if h.next_tick < now {
+                    h.next_tick = now + period; // overrun: skip, do not burst
                 }
-                true
-            } else {
-                false
+                tick_now(h, &log, now_s(t0));
             }
-        };
-        if due {
-            let r = brain.tick(now_s(t0));
-            publish(&mut brain, r.velocity, None);
-            let changed = last_outcome
-                .as_ref()
-                .is_none_or(|l| !l.same_kind(&r.outcome));
-            if changed {
-                match &r.outcome {
-                    Outcome::Command => rosout!(
-                        log,
-                        LogLevel::Info,
-                        "controlling: observation counts {:?}",
-                        r.counts
-                    ),
-                    other => rosout!(log, LogLevel::Warn, "commanding zero velocity: {other:?}"),
-                }
-            }
-            last_outcome = Some(r.outcome);
         }
 
         // ---- stats
         if Instant::now() >= next_stats {
             next_stats += stats_period;
-            let (m, s, r) = brain.world.known();
-            info!(
-                "counters {me}: {} | known machines={m} storages={s} peers={r}",
-                brain.counters
-            );
-            if p.stats_json {
-                print_stats_json(me, &brain.counters, t0, false);
+            for h in &hosted {
+                let (m, s, r) = h.brain.world.known();
+                info!(
+                    "counters {}: {} | known machines={m} storages={s} peers={r}",
+                    h.me, h.brain.counters
+                );
+                if p.stats_json {
+                    print_stats_json(&h.me, &h.brain.counters, t0, false);
+                }
             }
         }
     }
 
-    // ---- shutdown: stop the robot
-    publish(&mut brain, [0.0, 0.0], None);
-    rosout!(log, LogLevel::Info, "stopping: published zero cmd_vel");
-    info!("final counters {me}: {}", brain.counters);
-    if p.stats_json {
-        print_stats_json(me, &brain.counters, t0, true);
+    // ---- shutdown: stop every robot
+    let mut total = Counters::default();
+    for h in hosted.iter_mut() {
+        h.publish([0.0, 0.0], None);
+        rosout!(
+            log,
+            LogLevel::Info,
+            "{}stopping: published zero cmd_vel",
+            h.tag
+        );
+        info!("final counters {}: {}", h.me, h.brain.counters);
+        if p.stats_json {
+            print_stats_json(&h.me, &h.brain.counters, t0, true);
+        }
+        total.add(&h.brain.counters);
     }
-    // give the reliable writer a moment to deliver the zero command before teardown
+    if multi {
+        total.subscriptions = subs.len() as u64;
+        info!("final counters (all robots): {total}");
+    }
+    // give the reliable writers a moment to deliver the zero commands before teardown
     let until = Instant::now() + Duration::from_millis(300);
     while Instant::now() < until {
         std::thread::sleep(Duration::from_millis(20));
@@ -590,7 +613,80 @@ fn event_loop(
     if let Some(mut c) = clock_sub.take() {
         poll.registry().deregister(&mut c).ok();
     }
-    Ok(brain.counters)
+    Ok(total)
+}
+
+/// Log a change of what a robot's ticks decide (not every tick).
+fn log_outcome(h: &mut Hosted, log: &NodeLoggingHandle, r: &TickResult, what: &str) {
+    if h.last_outcome
+        .as_ref()
+        .is_none_or(|l| !l.same_kind(&r.outcome))
+    {
+        match &r.outcome {
+            Outcome::Command => rosout!(
+                *log,
+                LogLevel::Info,
+                "{}{what}: observation counts {:?}",
+                h.tag,
+                r.counts
+            ),
+            other => rosout!(
+                *log,
+                LogLevel::Warn,
+                "{}commanding zero velocity: {other:?}",
+                h.tag
+            ),
+        }
+    }
+    h.last_outcome = Some(r.outcome.clone());
+}
+
+/// Wall clock or sim time: one control step of `h` now, and its command.
+fn tick_now(h: &mut Hosted, log: &NodeLoggingHandle, now: f64) {
+    let r = h.brain.tick(now);
+    h.publish(r.velocity, None);
+    log_outcome(h, log, &r, "controlling");
+}
+
+/// Lockstep: act once `h`'s own data and every expected entity of the newest state are in
+/// (or after `wait`).
+fn lockstep_step(h: &mut Hosted, log: &NodeLoggingHandle, wait: Duration, now: f64) {
+    let Some(s) = h.brain.world.own_pose_stamp() else {
+        return;
+    };
+    if h.last_acted.is_some_and(|l| s < l) {
+        info!("{}sim time went back: resetting controller", h.tag);
+        h.brain.reset();
+        h.last_acted = None;
+        h.pending = None;
+    }
+    if h.last_acted.is_some_and(|l| s <= l) {
+        return;
+    }
+    let since = match h.pending {
+        Some((ps, since)) if ps == s => since,
+        _ => {
+            let now = Instant::now();
+            h.pending = Some((s, now));
+            now
+        }
+    };
+    let missing = h.brain.world.lockstep_missing(s, h.last_acted, now);
+    let timed_out = since.elapsed() >= wait;
+    if missing == Some(0) || timed_out {
+        if missing != Some(0) {
+            h.brain.counters.lockstep_wait_timeouts += 1;
+            debug!(
+                "{}lockstep: acting on {s} us with {missing:?} entities missing",
+                h.tag
+            );
+        }
+        let r = h.brain.tick_lockstep(s);
+        h.publish(r.velocity, Some(s));
+        h.last_acted = Some(s);
+        h.pending = None;
+        log_outcome(h, log, &r, "controlling (lockstep)");
+    }
 }
 
 /// One machine-readable stats line on stdout (`-p stats_json:=true`).
@@ -605,58 +701,61 @@ fn print_stats_json(me: &str, c: &Counters, t0: Instant, last: bool) {
     let _ = out.flush();
 }
 
-fn drain(sub: &Sub, brain: &mut Brain, now: f64) {
-    // bounded, so a flood on one topic cannot starve the loop
+/// Take every sample waiting on `sub` (at most 1000: a flood on one topic cannot starve
+/// the loop) and fan each out to every hosted robot. Returns true if the bound was hit
+/// (more may be waiting).
+fn drain(sub: &Sub, hosted: &mut [Hosted], now: f64, drops_seen: &mut u64) -> bool {
     for _ in 0..1000 {
-        let res = match &sub.kind {
+        let brains = hosted.iter_mut().map(|h| &mut h.brain);
+        let d = match &sub.kind {
             SubKind::Pose(s) => match s.take() {
-                Ok(Some((m, info))) => Some(brain.world.on_pose_from(
+                Ok(Some((m, info))) => fanout::deliver(
+                    brains,
                     &sub.topic,
-                    &m,
-                    writer_id(&info),
+                    &Incoming::Pose {
+                        msg: &m,
+                        writer: writer_id(&info),
+                    },
                     now,
-                )),
-                Ok(None) => None,
+                ),
+                Ok(None) => return false,
                 Err(e) => {
                     debug!("undecodable sample on {}: {e:?}", sub.topic.ros_name());
-                    Some(Err(DropReason::Decode))
+                    fanout::deliver(brains, &sub.topic, &Incoming::Undecodable, now)
                 }
             },
             SubKind::Flag(s) => match s.take() {
-                Ok(Some((m, info))) => Some(brain.world.on_flag_stamped(
+                Ok(Some((m, info))) => fanout::deliver(
+                    brains,
                     &sub.topic,
-                    m.data,
-                    stamp_key_info(&info),
-                    writer_id(&info),
+                    &Incoming::Flag {
+                        value: m.data,
+                        stamp: stamp_key_info(&info),
+                        writer: writer_id(&info),
+                    },
                     now,
-                )),
-                Ok(None) => None,
+                ),
+                Ok(None) => return false,
                 Err(e) => {
                     debug!("undecodable sample on {}: {e:?}", sub.topic.ros_name());
-                    Some(Err(DropReason::Decode))
+                    fanout::deliver(brains, &sub.topic, &Incoming::Undecodable, now)
                 }
             },
         };
-        match res {
-            None => return,
-            Some(Ok(a)) => {
-                brain.counters.accepted += 1;
-                if a == Accepted::NewWriter {
-                    brain.counters.writer_changes += 1;
-                    warn!(
-                        "{}: the pinned writer's data went stale; now pinned to a new writer",
-                        sub.topic.ros_name()
-                    );
-                }
+        if d.new_writer > 0 {
+            warn!(
+                "{}: the pinned writer's data went stale; now pinned to a new writer",
+                sub.topic.ros_name()
+            );
+        }
+        if let Some(r) = d.reason {
+            if *drops_seen < 20 || drops_seen.is_power_of_two() {
+                warn!("dropped a sample on {}: {r:?}", sub.topic.ros_name());
             }
-            Some(Err(r)) => {
-                if brain.counters.dropped() < 20 || brain.counters.dropped().is_power_of_two() {
-                    warn!("dropped a sample on {}: {r:?}", sub.topic.ros_name());
-                }
-                brain.counters.drop(r);
-            }
+            *drops_seen += 1;
         }
     }
+    true
 }
 
 /// The DDS writer a received sample came from (its GUID).

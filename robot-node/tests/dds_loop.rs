@@ -396,3 +396,169 @@ fn sim_time_ticks_follow_clock() {
     }
     assert_eq!(n, 0, "commands while /clock was stopped");
 }
+
+/// Two robots in one process (`-p robots:=robot_0,robot_1`): one reader per topic for
+/// both (robot_1's own topics are robot_0's peer topics and vice versa), each robot acts
+/// on its own data and sees the other as a peer, each has its own cmd_vel.
+#[test]
+fn two_robots_in_one_process_share_one_reader_per_topic() {
+    let d = domain(57);
+    let ctx = Context::with_options(ContextOptions::new().domain_id(d)).unwrap();
+    let mut node = ctx
+        .new_node(
+            NodeName::new("/", &format!("test_multi_{}", std::process::id())).unwrap(),
+            NodeOptions::new().enable_rosout(false),
+        )
+        .unwrap();
+    let pose_pubs: Vec<Publisher<PoseStamped>> = ["/robot_0/pose", "/robot_1/pose"]
+        .iter()
+        .map(|n| publisher(&mut node, n, Profile::RobotStream))
+        .collect();
+    let part_pubs: Vec<Publisher<Bool>> = ["/robot_0/has_part", "/robot_1/has_part"]
+        .iter()
+        .map(|n| publisher(&mut node, n, Profile::RobotStream))
+        .collect();
+    let m_pose: Publisher<PoseStamped> =
+        publisher(&mut node, "/machine_0/pose", Profile::LatchedPose);
+    let m_ready: Publisher<Bool> =
+        publisher(&mut node, "/machine_0/part_ready", Profile::PartReady);
+    let s_pose: Publisher<PoseStamped> =
+        publisher(&mut node, "/storage_0/pose", Profile::LatchedPose);
+    let cmd_sub = |node: &mut Node, name: &str| -> Subscription<Twist> {
+        let qos = Profile::RobotStream.qos();
+        let topic = node
+            .create_topic(&Name::parse(name).unwrap(), Twist::type_name(), &qos)
+            .unwrap();
+        node.create_subscription(&topic, Some(qos)).unwrap()
+    };
+    // spun, so that the node learns which readers its writers matched
+    let spinner = node.spinner().unwrap();
+    std::thread::spawn(move || smol::block_on(spinner.spin()));
+    let cmd0 = cmd_sub(&mut node, "/robot_0/cmd_vel");
+    let cmd1 = cmd_sub(&mut node, "/robot_1/cmd_vel");
+
+    let tmp = std::env::temp_dir();
+    let err_path = tmp.join(format!("robot_node_multi_{}.log", std::process::id()));
+    let out_path = tmp.join(format!("robot_node_multi_{}.jsonl", std::process::id()));
+    let child = Command::new(env!("CARGO_BIN_EXE_robot_node"))
+        .args([
+            "--ros-args",
+            "-p",
+            "robots:=robot_0..1",
+            "-p",
+            "control_rate_hz:=20",
+            "-p",
+            "discovery_period_s:=0.2",
+            "-p",
+            "stats_json:=true",
+            "-p",
+            "stats_period_s:=0.5",
+        ])
+        .env("ROS_DOMAIN_ID", d.to_string())
+        .env("RUST_LOG", "info,rustdds=warn,ros2_client=warn")
+        .stdout(std::fs::File::create(&out_path).unwrap())
+        .stderr(std::fs::File::create(&err_path).unwrap())
+        .spawn()
+        .unwrap();
+    let mut child = Kill(child);
+    let show_log = || std::fs::read_to_string(&err_path).unwrap_or_default();
+
+    let running = Arc::new(AtomicBool::new(true));
+    let pub_thread = {
+        let running = running.clone();
+        std::thread::spawn(move || {
+            while running.load(Ordering::SeqCst) {
+                let st = Time::now();
+                // robot_0: no part, left of the ready machine -> right (+x);
+                // robot_1: carrying a part, below the storage -> up (+y)
+                pose_pubs[0]
+                    .publish(PoseStamped::planar(st, "map", -0.5, -0.5))
+                    .ok();
+                part_pubs[0].publish(Bool { data: false }).ok();
+                pose_pubs[1]
+                    .publish(PoseStamped::planar(st, "map", -0.5, 0.2))
+                    .ok();
+                part_pubs[1].publish(Bool { data: true }).ok();
+                m_pose
+                    .publish(PoseStamped::planar(st, "map", 0.5, -0.5))
+                    .ok();
+                m_ready.publish(Bool { data: true }).ok();
+                s_pose
+                    .publish(PoseStamped::planar(st, "map", -0.5, 0.8))
+                    .ok();
+                std::thread::sleep(Duration::from_millis(50));
+            }
+            (m_pose, pose_pubs)
+        })
+    };
+    let right = wait_for(&cmd0, Duration::from_secs(15), |t| {
+        t.linear.x > 0.4 && t.linear.y == 0.0
+    });
+    let up = wait_for(&cmd1, Duration::from_secs(5), |t| {
+        t.linear.y > 0.4 && t.linear.x == 0.0
+    });
+    // let a stats period pass with everything known
+    std::thread::sleep(Duration::from_millis(1200));
+    running.store(false, Ordering::SeqCst);
+    let (m_pose, pose_pubs) = pub_thread.join().unwrap();
+    // one DDS reader per topic in the robot_node process: the machine's pose writer and
+    // robot_1's pose writer each matched exactly one reader (two robots with their own
+    // readers would make two)
+    let matched = (
+        m_pose.get_subscription_count(&node),
+        pose_pubs[1].get_subscription_count(&node),
+    );
+    let st = Command::new("kill")
+        .args(["-INT", &child.0.id().to_string()])
+        .status()
+        .unwrap();
+    assert!(st.success());
+    let t_kill = Instant::now();
+    let status = loop {
+        if let Some(s) = child.0.try_wait().unwrap() {
+            break s;
+        }
+        assert!(
+            t_kill.elapsed() < Duration::from_secs(5),
+            "no exit on SIGINT"
+        );
+        std::thread::sleep(Duration::from_millis(10));
+    };
+    let log = show_log();
+    assert!(status.success(), "exit status {status:?}; log:\n{log}");
+    assert!(right.is_some(), "robot_0 never commanded +x; log:\n{log}");
+    assert!(up.is_some(), "robot_1 never commanded +y; log:\n{log}");
+    assert_eq!(
+        matched,
+        (1, 1),
+        "readers matched by /machine_0/pose, /robot_1/pose"
+    );
+
+    let finals: Vec<serde_json::Value> = std::fs::read_to_string(&out_path)
+        .unwrap()
+        .lines()
+        .filter_map(|l| serde_json::from_str::<serde_json::Value>(l).ok())
+        .filter(|v| v["final"] == true)
+        .collect();
+    assert_eq!(finals.len(), 2, "one final stats line per robot");
+    for (f, me) in finals.iter().zip(["robot_0", "robot_1"]) {
+        assert_eq!(f["robot"], me);
+        // 2 own topics per robot + machine pose/part_ready + storage pose = 7 readers in
+        // the process, shared (separate readers per robot would be 2 x 7 = 14)
+        assert_eq!(f["subscriptions"], 7, "{f}");
+        assert!(f["commands"].as_u64().unwrap() > 5, "{f}");
+        assert_eq!(f["dropped"]["foreign_writer"], 0, "{f}");
+    }
+    // each sees one peer (the other hosted robot), one machine, one storage
+    for me in ["robot_0", "robot_1"] {
+        assert!(
+            log.contains(&format!("counters {me}: accepted=",))
+                && log.lines().any(|l| l.contains(&format!("counters {me}:"))
+                    && l.contains("known machines=1 storages=1 peers=1")),
+            "{me} did not know 1 machine, 1 storage, 1 peer:\n{log}"
+        );
+    }
+    assert!(log.contains("2 robots in one process"), "{log}");
+    std::fs::remove_file(&err_path).ok();
+    std::fs::remove_file(&out_path).ok();
+}
