@@ -124,21 +124,25 @@ exp_a() {
     curves A "A: full retraining, training per setup" --metrics reward,mu runs/exp/A/*/*/seed*/log.csv
 }
 
-exp_c() {
-    local cfg; cfg=$(train_cfg C 42 28 14)
+# Zero-shot experiments (C, R): train on 6.4_2-sized data (MAPPO padded to 42.28_14), then
+# evaluate every model on the nine zero-shot setups.
+ZERO_SHOT_SETUPS=6.4_2,2.2_2,4.2_2,12.8_4,18.12_6,24.16_8,30.20_10,36.24_12,42.28_14
+zero_shot() { # name table-title curves-title train-args...
+    local name="$1" title="$2" ctitle="$3"; shift 3
+    local cfg; cfg=$(train_cfg "$name" 42 28 14)
     local e; e=$(eps 2000)
-    local setups=6.4_2,2.2_2,4.2_2,12.8_4,18.12_6,24.16_8,30.20_10,36.24_12,42.28_14
     for seed in $SEEDS; do
         for m in smappo mappo; do
-            local out="runs/exp/C/$m/seed$seed"
-            train "$out" "$m" "$seed" "$cfg" --setup 6.4_2 --episodes "$e"
-            evaluate "$out/policy.safetensors" "$setups" "$out/eval"
+            local out="runs/exp/$name/$m/seed$seed"
+            train "$out" "$m" "$seed" "$cfg" "$@" --episodes "$e"
+            evaluate "$out/policy.safetensors" "$ZERO_SHOT_SETUPS" "$out/eval"
         done
     done
-    greedy C "$setups"
-    table C "C: zero-shot from 6.4_2" runs/exp/C/*/seed*/eval/results.csv runs/exp/C/greedy/eval/results.csv
-    curves C "C: training on 6.4_2" runs/exp/C/*/seed*/log.csv
+    greedy "$name" "$ZERO_SHOT_SETUPS"
+    table "$name" "$title" runs/exp/"$name"/*/seed*/eval/results.csv runs/exp/"$name"/greedy/eval/results.csv
+    curves "$name" "$ctitle" runs/exp/"$name"/*/seed*/log.csv
 }
+exp_c() { zero_shot C "C: zero-shot from 6.4_2" "C: training on 6.4_2" --setup 6.4_2; }
 
 curriculum() { # name initial-episodes
     local name="$1" e0; e0=$(eps "$2")
@@ -170,19 +174,9 @@ exp_d() {
 # default 2-12 robots, 2-8 machines, 1-4 storages) for the same episode budget as C, then
 # evaluated zero-shot on C's setups, to compare with C's single-setup (6.4_2) training.
 exp_r() {
-    local cfg; cfg=$(train_cfg R 42 28 14)
-    local e; e=$(eps 2000)
-    local setups=6.4_2,2.2_2,4.2_2,12.8_4,18.12_6,24.16_8,30.20_10,36.24_12,42.28_14
-    for seed in $SEEDS; do
-        for m in smappo mappo; do
-            local out="runs/exp/R/$m/seed$seed"
-            train "$out" "$m" "$seed" "$cfg" --randomize "${RANGE:-2..12.2..8_1..4}" --episodes "$e"
-            evaluate "$out/policy.safetensors" "$setups" "$out/eval"
-        done
-    done
-    greedy R "$setups"
-    table R "R: randomized counts per update (${RANGE:-2..12.2..8_1..4}), zero-shot" runs/exp/R/*/seed*/eval/results.csv runs/exp/R/greedy/eval/results.csv
-    curves R "R: training on randomized counts" runs/exp/R/*/seed*/log.csv
+    local range="${RANGE:-2..12.2..8_1..4}"
+    zero_shot R "R: randomized counts per update ($range), zero-shot" \
+        "R: training on randomized counts" --randomize "$range"
 }
 
 case "${1:-}" in
