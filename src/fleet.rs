@@ -9,6 +9,11 @@
 //! language, through its stdin), `status` prints the processes and the last metrics.
 //! `--record DIR` makes the bridge record a rosbag2 MCAP bag of everything it publishes and
 //! receives.
+//!
+//! A robot_node that exits with code 75 (`EX_TEMPFAIL`: its watchdog ended a start-up or
+//! control loop hung in the RustDDS entity-creation deadlock, docs/bench/ros.md) is
+//! restarted with the same arguments, at most [`MAX_RESTARTS`] times per robot; `status`
+//! and the end of the run report the restarts. Any other early exit is a failure.
 
 use std::io::{BufRead, BufReader};
 use std::path::{Path, PathBuf};
@@ -82,6 +87,27 @@ fn sibling(name: &str) -> Result<PathBuf> {
         );
     }
     Ok(p)
+}
+
+/// robot_node's exit code when its watchdog ended it (robot_node::watchdog::EXIT_WATCHDOG).
+const EXIT_WATCHDOG: i32 = 75;
+/// Watchdog restarts allowed per robot.
+const MAX_RESTARTS: u32 = 3;
+
+/// Restart a robot_node that exited with `code` after `restarts` restarts already?
+fn should_restart(code: Option<i32>, restarts: u32) -> bool {
+    code == Some(EXIT_WATCHDOG) && restarts < MAX_RESTARTS
+}
+
+/// `robot_3 x1, robot_7 x2`, or `none`.
+fn restarts_summary(r: &std::collections::BTreeMap<String, u32>) -> String {
+    if r.is_empty() {
+        return "none".into();
+    }
+    r.iter()
+        .map(|(n, k)| format!("{n} x{k}"))
+        .collect::<Vec<_>>()
+        .join(", ")
 }
 
 struct Proc {
@@ -251,6 +277,15 @@ pub fn run(mut a: FleetArgs) -> Result<()> {
         let p = log_dir.join(format!("{name}.log"));
         std::fs::File::create(&p).with_context(|| format!("creating {}", p.display()))
     };
+    // a restarted robot_node appends to its log (the watchdog's message stays)
+    let log_append = |name: &str| -> Result<std::fs::File> {
+        let p = log_dir.join(format!("{name}.log"));
+        std::fs::OpenOptions::new()
+            .create(true)
+            .append(true)
+            .open(&p)
+            .with_context(|| format!("opening {}", p.display()))
+    };
 
     let stop = Arc::new(AtomicBool::new(false));
     {
@@ -262,7 +297,7 @@ pub fn run(mut a: FleetArgs) -> Result<()> {
     use std::os::unix::process::CommandExt;
     let mut procs: Vec<Proc> = Vec::new();
     let f = |x: f32| format!("{:?}", x as f64);
-    let spawn_robot = |name: &str| -> Result<Proc> {
+    let spawn_robot = |name: &str, restart: bool| -> Result<Proc> {
         let mut c = Command::new(&node_bin);
         c.env("ROS_DOMAIN_ID", domain.to_string())
             .args(["--ros-args", "-r", &format!("__ns:=/{name}")])
@@ -288,7 +323,11 @@ pub fn run(mut a: FleetArgs) -> Result<()> {
             .args(["-p", &format!("stale_timeout_s:={:?}", a.stale_timeout)])
             .stdin(Stdio::null())
             .stdout(Stdio::null())
-            .stderr(log(name)?)
+            .stderr(if restart {
+                log_append(name)?
+            } else {
+                log(name)?
+            })
             .process_group(0); // Ctrl-C reaches us only; we stop the children in order
         if lockstep {
             c.args(["-p", "lockstep:=true"]);
@@ -308,7 +347,7 @@ pub fn run(mut a: FleetArgs) -> Result<()> {
         })
     };
     for i in 0..setup.robots {
-        procs.push(spawn_robot(&format!("robot_{i}"))?);
+        procs.push(spawn_robot(&format!("robot_{i}"), false)?);
     }
     let mut next_robot = setup.robots;
     let mut b = Command::new(&bridge_bin);
@@ -382,6 +421,8 @@ pub fn run(mut a: FleetArgs) -> Result<()> {
     };
     let mut last: Option<serde_json::Value> = None;
     let mut early_failure: Option<String> = None;
+    // watchdog restarts per robot name
+    let mut restarts: std::collections::BTreeMap<String, u32> = Default::default();
     loop {
         for line in ctx_rx.try_iter() {
             let line = line.trim();
@@ -405,7 +446,7 @@ pub fn run(mut a: FleetArgs) -> Result<()> {
                         println!("fleet: t={at:.1}s error: {name} is already running");
                         continue;
                     }
-                    match spawn_robot(&name) {
+                    match spawn_robot(&name, false) {
                         Ok(p) => {
                             println!("fleet: t={at:.1}s started {name} (pid {})", p.child.id());
                             procs.push(p);
@@ -465,9 +506,10 @@ pub fn run(mut a: FleetArgs) -> Result<()> {
                         .map(|p| format!("{}({})", p.name, p.child.id()))
                         .collect();
                     println!(
-                        "fleet: t={at:.1}s status: {} processes: {}",
+                        "fleet: t={at:.1}s status: {} processes: {}; watchdog restarts: {}",
                         names.len(),
-                        names.join(" ")
+                        names.join(" "),
+                        restarts_summary(&restarts)
                     );
                     if let Some(v) = &last {
                         println!("fleet: last metrics {v}");
@@ -507,12 +549,38 @@ pub fn run(mut a: FleetArgs) -> Result<()> {
             }
             Err(_) => {}
         }
-        // a child that exits by itself before the end is a failure
-        for p in procs.iter_mut() {
-            if let Ok(Some(s)) = p.child.try_wait() {
-                if p.name != "sim_bridge" || !s.success() {
-                    early_failure = Some(format!("{} exited early ({s})", p.name));
+        // a child that exits by itself before the end is a failure, except a robot_node
+        // its watchdog ended (code 75): restarted, up to MAX_RESTARTS times per robot
+        for proc_ in procs.iter_mut() {
+            let Ok(Some(s)) = proc_.child.try_wait() else {
+                continue;
+            };
+            let name = proc_.name.clone();
+            let done = restarts.get(&name).copied().unwrap_or(0);
+            if name != "sim_bridge" && should_restart(s.code(), done) {
+                let at = t0.elapsed().as_secs_f64();
+                let old = proc_.child.id();
+                match spawn_robot(&name, true) {
+                    Ok(p) => {
+                        println!(
+                            "fleet: t={at:.1}s {name} (pid {old}) hung and was ended by its watchdog ({s}): restarted as pid {} (restart {}/{MAX_RESTARTS})",
+                            p.child.id(),
+                            done + 1
+                        );
+                        restarts.insert(name, done + 1);
+                        *proc_ = p;
+                    }
+                    Err(e) => {
+                        early_failure =
+                            Some(format!("{name} exited early ({s}); restart failed: {e:#}"))
+                    }
                 }
+            } else if name != "sim_bridge" && s.code() == Some(EXIT_WATCHDOG) {
+                early_failure = Some(format!(
+                    "{name} exited early ({s}: watchdog) after {done} restarts"
+                ));
+            } else if name != "sim_bridge" || !s.success() {
+                early_failure = Some(format!("{name} exited early ({s})"));
             }
         }
         if early_failure.is_some() {
@@ -528,6 +596,12 @@ pub fn run(mut a: FleetArgs) -> Result<()> {
     }
     if let Some(v) = &last {
         println!("final: {v}");
+    }
+    if !restarts.is_empty() {
+        println!(
+            "fleet: robot_node watchdog restarts: {}",
+            restarts_summary(&restarts)
+        );
     }
     if let Some(e) = early_failure {
         bail!("{e}; logs in {}", log_dir.display());
@@ -555,6 +629,21 @@ fn policy_check(p: &Path) -> Result<()> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn restart_only_watchdog_exits_up_to_the_cap() {
+        assert!(should_restart(Some(EXIT_WATCHDOG), 0));
+        assert!(should_restart(Some(75), MAX_RESTARTS - 1));
+        assert!(!should_restart(Some(75), MAX_RESTARTS));
+        for other in [Some(0), Some(1), Some(2), None] {
+            assert!(!should_restart(other, 0), "{other:?}");
+        }
+        let mut r = std::collections::BTreeMap::new();
+        assert_eq!(restarts_summary(&r), "none");
+        r.insert("robot_7".to_string(), 2);
+        r.insert("robot_3".to_string(), 1);
+        assert_eq!(restarts_summary(&r), "robot_3 x1, robot_7 x2");
+    }
 
     #[test]
     fn live_commands_parse() {

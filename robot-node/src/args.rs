@@ -70,6 +70,14 @@ pub struct Params {
     /// hosted robot, one `cmd_vel` writer and controller per robot, one event loop.
     /// Empty: one robot, identified by the namespace.
     pub robots: Vec<String>,
+    /// Watchdog (docs/bench/ros.md): start-up (controller, DDS context, node, writers,
+    /// subscriptions) must make progress (a stage, an entity, a retry) at least this often
+    /// until the event loop runs, else the process exits with code 75 (`EX_TEMPFAIL`) for
+    /// the launcher to restart it; 0 disables.
+    pub startup_timeout_s: f64,
+    /// Watchdog: the event loop must iterate at least this often once running (it wakes
+    /// every 100 ms at most), else exit code 75; 0 disables.
+    pub stall_timeout_s: f64,
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -103,6 +111,8 @@ impl Default for Params {
             lockstep_wait_s: 0.5,
             stats_json: false,
             robots: Vec::new(),
+            startup_timeout_s: 10.0,
+            stall_timeout_s: 10.0,
         }
     }
 }
@@ -129,7 +139,9 @@ parameters: policy (path), controller (greedy|policy), control_rate_hz (10), use
             robot_radius (0.08), machine_half_x/_y (0.12), storage_half_x (0.15), storage_half_y (0.08),
             lockstep (false; implies use_sim_time), lockstep_wait_s (0.5),
             stats_json (false; counters as JSON lines on stdout),
-            robots (multi-robot mode: robot_0,robot_1,... or robot_0..N-1 in one process)
+            robots (multi-robot mode: robot_0,robot_1,... or robot_0..N-1 in one process),
+            startup_timeout_s (10), stall_timeout_s (10): watchdog, exit code 75 when
+            start-up makes no progress or the control loop stops for that long (0 off)
 environment: ROS_DOMAIN_ID (0)";
 
 /// Parse the process arguments (without argv\[0\]) and `ROS_DOMAIN_ID`.
@@ -259,6 +271,8 @@ fn apply_param(p: &mut Params, name: &str, v: &ParamValue) -> Result<Applied, Ar
         },
         "discovery_period_s" => p.discovery_period_s = positive(name, v)?,
         "robots" => p.robots = parse_robots(name, v)?,
+        "startup_timeout_s" => p.startup_timeout_s = non_negative(name, v)?,
+        "stall_timeout_s" => p.stall_timeout_s = non_negative(name, v)?,
         "stats_json" => match v {
             ParamValue::Bool(b) => p.stats_json = *b,
             other => {
@@ -271,6 +285,19 @@ fn apply_param(p: &mut Params, name: &str, v: &ParamValue) -> Result<Applied, Ar
         _ => return Ok(Applied::Unknown),
     }
     Ok(Applied::Yes)
+}
+
+/// A finite number of seconds >= 0 (0: disabled).
+fn non_negative(name: &str, v: &ParamValue) -> Result<f64, ArgError> {
+    let x = num(name, v)?;
+    if x.is_finite() && x >= 0.0 {
+        Ok(x)
+    } else {
+        Err(ArgError::Param {
+            name: name.into(),
+            msg: format!("must be a finite number of seconds >= 0 (0 disables), got {x}"),
+        })
+    }
 }
 
 /// `robot_0,robot_3` or the range form `robot_0..5` (= robot_0 .. robot_5).
@@ -344,6 +371,32 @@ mod tests {
             "robots:=3",
         ] {
             assert!(parse(["--ros-args", "-p", bad], None).is_err(), "{bad}");
+        }
+    }
+
+    #[test]
+    fn watchdog_timeouts() {
+        let p = parse_ok(&[]);
+        assert_eq!((p.startup_timeout_s, p.stall_timeout_s), (10.0, 10.0));
+        let p = parse_ok(&[
+            "--ros-args",
+            "-p",
+            "startup_timeout_s:=2.5",
+            "-p",
+            "stall_timeout_s:=0",
+        ]);
+        assert_eq!((p.startup_timeout_s, p.stall_timeout_s), (2.5, 0.0));
+        for (bad, name) in [
+            ("startup_timeout_s:=-1", "startup_timeout_s"),
+            ("startup_timeout_s:=soon", "startup_timeout_s"),
+            ("startup_timeout_s:=.inf", "startup_timeout_s"),
+            ("stall_timeout_s:=-0.5", "stall_timeout_s"),
+            ("stall_timeout_s:=true", "stall_timeout_s"),
+        ] {
+            let e = parse(["--ros-args", "-p", bad], None)
+                .unwrap_err()
+                .to_string();
+            assert!(e.contains(name), "{bad}: `{e}` does not name {name}");
         }
     }
 

@@ -7,11 +7,13 @@
 //!   and the scripted greedy controller;
 //! - [`tick`]: one control step, DDS-free;
 //! - [`fanout`]: one received sample to every robot a process hosts, DDS-free;
-//! - [`node`]: the ros2-client node (discovery, one reader per topic, timing, cmd_vel).
+//! - [`node`]: the ros2-client node (discovery, one reader per topic, timing, cmd_vel);
+//! - [`watchdog`]: exit code 75 when start-up or the control loop hangs (RustDDS deadlock).
 
 pub mod args;
 pub mod controller;
 pub mod fanout;
 pub mod node;
 pub mod tick;
+pub mod watchdog;
 pub mod world;

@@ -1,9 +1,15 @@
 //! `robot_node` binary: parse ROS 2 arguments, run the node until Ctrl-C / SIGTERM.
+//!
+//! Exit codes: 0 stopped, 1 error, 2 bad arguments, 75 (`EX_TEMPFAIL`) the watchdog ended a
+//! hung start-up or control loop ([`robot_node::watchdog`]; a restart usually succeeds).
 
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 
+use std::time::Duration;
+
 use robot_node::args::{self, ArgError};
+use robot_node::watchdog::{Limits, Watchdog, EXIT_WATCHDOG};
 
 fn main() {
     let env_domain = std::env::var("ROS_DOMAIN_ID").ok();
@@ -44,7 +50,22 @@ fn main() {
         }
     }
 
-    match robot_node::node::run(&params, &stop) {
+    // RustDDS 0.15 can deadlock while creating entities (docs/bench/ros.md): exit with
+    // code 75 (EX_TEMPFAIL) when start-up or the control loop hangs, for a restart
+    let wd = Watchdog::new(Limits {
+        startup: Duration::from_secs_f64(params.startup_timeout_s),
+        stall: Duration::from_secs_f64(params.stall_timeout_s),
+    });
+    let watching = wd.spawn(|stuck| {
+        eprintln!("robot_node: watchdog: {stuck}");
+        std::process::exit(EXIT_WATCHDOG);
+    });
+    if let Err(e) = watching {
+        eprintln!("robot_node: error: cannot start the watchdog thread: {e}");
+        std::process::exit(1);
+    }
+
+    match robot_node::node::run_watched(&params, &stop, &wd) {
         Ok(_) => {}
         Err(e) => {
             tracing::error!("{e:#}");

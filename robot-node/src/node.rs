@@ -28,6 +28,7 @@ use crate::args::{ControllerKind, Params};
 use crate::controller::{Controller, GreedyController, PolicyController};
 use crate::fanout::{self, Incoming};
 use crate::tick::{Brain, Outcome, TickResult};
+use crate::watchdog::{Stage, Watchdog};
 use crate::world::{Counters, DropReason, World, WorldConfig, WriterId};
 use msgs::dds::{stamp_key_info, StampedWriter};
 use obs::greedy::GreedyParams;
@@ -113,6 +114,13 @@ fn subscribe<M: RosMessage>(
 /// in multi-robot mode), one reader per input topic whose samples are fanned out to every
 /// hosted robot ([`crate::fanout`]), one `cmd_vel` writer per robot, one event loop.
 pub fn run(p: &Params, stop: &AtomicBool) -> anyhow::Result<Counters> {
+    run_watched(p, stop, &Watchdog::disabled())
+}
+
+/// [`run`], reporting its start-up stages and event-loop heartbeat to `wd`
+/// ([`crate::watchdog`]).
+pub fn run_watched(p: &Params, stop: &AtomicBool, wd: &Watchdog) -> anyhow::Result<Counters> {
+    wd.stage(Stage::Controller);
     let multi = !p.robots.is_empty();
     let names: Vec<String> = if multi {
         p.robots.clone()
@@ -136,7 +144,9 @@ pub fn run(p: &Params, stop: &AtomicBool) -> anyhow::Result<Counters> {
             make_controller(p)?
         };
         robots.push((name, controller, k_speed));
+        wd.beat(); // start-up progress
     }
+    wd.stage(Stage::Context);
     let ctx = Context::with_options(ContextOptions::new().domain_id(p.domain_id))
         .map_err(dds_err("DDS context"))?;
     if multi {
@@ -145,20 +155,25 @@ pub fn run(p: &Params, stop: &AtomicBool) -> anyhow::Result<Counters> {
             robots.len()
         );
     }
-    run_on(&ctx, p, stop, robots, multi)
+    run_on(&ctx, p, stop, robots, multi, wd)
 }
 
 /// Retry a DDS set-up step that can fail transiently (RustDDS reports a full internal
 /// channel as a poisoned entity when many entities are created at once): 40 attempts,
 /// 250 ms apart, unless stopping.
+///
+/// Every attempt is start-up progress for the watchdog (a retry loop is not a hang).
 fn retry<T>(
     what: &str,
     stop: &AtomicBool,
+    wd: &Watchdog,
     mut f: impl FnMut() -> anyhow::Result<T>,
 ) -> anyhow::Result<T> {
     let mut attempt = 1;
     loop {
-        match f() {
+        let r = f();
+        wd.beat();
+        match r {
             Ok(x) => return Ok(x),
             Err(e) if attempt < 40 && !stop.load(Ordering::SeqCst) => {
                 if attempt == 1 {
@@ -182,8 +197,10 @@ fn run_on(
     stop: &AtomicBool,
     robots: Vec<RobotSpec>,
     multi: bool,
+    wd: &Watchdog,
 ) -> anyhow::Result<Counters> {
-    let (mut node, spinner) = retry("node", stop, || {
+    wd.stage(Stage::Node);
+    let (mut node, spinner) = retry("node", stop, wd, || {
         let mut node = ctx
             .new_node(
                 NodeName::new(&p.namespace, &p.node_name).map_err(dds_err("node name"))?,
@@ -204,7 +221,8 @@ fn run_on(
         }
     })?;
 
-    let result = event_loop(p, stop, ctx, &mut node, robots, multi);
+    let result = event_loop(p, stop, ctx, &mut node, robots, multi, wd);
+    wd.stage(Stage::Done);
     drop(node); // signals the spinner to stop
     if spin_thread.join().is_err() {
         warn!("spinner thread panicked");
@@ -251,7 +269,9 @@ fn event_loop(
     node: &mut Node,
     robots: Vec<RobotSpec>,
     multi: bool,
+    wd: &Watchdog,
 ) -> anyhow::Result<Counters> {
+    wd.stage(Stage::Writers);
     let wcfg = WorldConfig {
         stale_timeout_s: p.stale_timeout_s,
         static_stale_timeout_s: p.static_stale_timeout_s,
@@ -266,7 +286,7 @@ fn event_loop(
     let placeholder = Instant::now();
     for (me, controller, k_speed) in robots {
         let cmd_name = topics::robot(&me, Leaf::CmdVel).ros_name();
-        let cmd: StampedWriter<Twist> = retry("cmd_vel writer", stop, || {
+        let cmd: StampedWriter<Twist> = retry("cmd_vel writer", stop, wd, || {
             StampedWriter::new(ctx, node, &cmd_name, Profile::RobotStream)
                 .map_err(|e| anyhow!("cmd_vel writer: {e}"))
         })?;
@@ -286,6 +306,7 @@ fn event_loop(
         });
     }
 
+    wd.stage(Stage::Subscriptions);
     let mut poll = Poll::new().context("mio poll")?;
     let mut events = Events::with_capacity(1024);
     let mut subs: Vec<Sub> = Vec::new();
@@ -329,7 +350,7 @@ fn event_loop(
         .collect();
     for t in own {
         known.insert(t.clone());
-        retry("own subscription", stop, || {
+        retry("own subscription", stop, wd, || {
             add_sub(node, &poll, &mut subs, t.clone())
         })?;
         fanout::touch(hosted.iter_mut().map(|h| &mut h.brain), &t);
@@ -391,7 +412,9 @@ fn event_loop(
     let mut sim_last_t: f64 = f64::NEG_INFINITY;
     let lockstep_wait = Duration::from_secs_f64(p.lockstep_wait_s);
 
+    wd.stage(Stage::Running);
     while !stop.load(Ordering::SeqCst) {
+        wd.beat();
         // ---- wait for data or the next deadline (at most 100 ms, to notice `stop`)
         let now = Instant::now();
         let mut deadline = next_discovery
@@ -464,7 +487,10 @@ fn event_loop(
                     continue;
                 }
                 known.insert(topic.clone());
-                match add_sub(node, &poll, &mut subs, topic.clone()) {
+                wd.stage(Stage::DiscoveredSubscription);
+                let added = add_sub(node, &poll, &mut subs, topic.clone());
+                wd.stage(Stage::Running);
+                match added {
                     Ok(()) => {
                         fanout::touch(hosted.iter_mut().map(|h| &mut h.brain), &topic);
                         // a new reader may hold samples before its first event is seen
