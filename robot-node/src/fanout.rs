@@ -303,7 +303,7 @@ mod tests {
     #[test]
     fn one_hosted_robot_is_the_single_robot_world() {
         // a hub of one behaves exactly like feeding the world directly
-        let mut hub = vec![brain("robot_0")];
+        let mut hub = [brain("robot_0")];
         let mut direct = brain("robot_0");
         let m = pose(0.5, -0.5);
         let fake = pose(-1.0, 0.0);
@@ -367,7 +367,7 @@ mod tests {
 
     #[test]
     fn touch_reaches_every_robot() {
-        let mut brains = vec![brain("robot_0"), brain("robot_1")];
+        let mut brains = [brain("robot_0"), brain("robot_1")];
         touch(brains.iter_mut(), &robot("robot_7", Leaf::Pose));
         touch(brains.iter_mut(), &machine(3, Leaf::Pose));
         // robot_1's own topics make robot_1 a peer of robot_0 only
