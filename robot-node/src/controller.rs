@@ -171,11 +171,12 @@ impl Controller for PolicyController {
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
     use obs::ObsBuilder;
 
-    fn params(k: f32) -> GreedyParams {
+    /// Greedy parameters of the default scenario (also used by the tick and fan-out tests).
+    pub(crate) fn params(k: f32) -> GreedyParams {
         GreedyParams {
             robot_radius: 0.08,
             machine_half: [0.12, 0.12],

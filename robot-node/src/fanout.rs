@@ -120,13 +120,7 @@ mod tests {
                 room: RoomBounds::default(),
             },
         );
-        let gp = obs::greedy::GreedyParams {
-            robot_radius: 0.08,
-            machine_half: [0.12, 0.12],
-            storage_half: [0.15, 0.08],
-            k_speed: 0.5,
-            dt: 0.1,
-        };
+        let gp = crate::controller::tests::params(0.5);
         Brain::new(w, Box::new(GreedyController::new(gp)), 0.5)
     }
     fn pose(x: f64, y: f64) -> PoseStamped {

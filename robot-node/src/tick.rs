@@ -170,13 +170,7 @@ mod tests {
 
     #[test]
     fn greedy_heads_to_machine_then_stops_when_stale() {
-        let gp = obs::greedy::GreedyParams {
-            robot_radius: 0.08,
-            machine_half: [0.12, 0.12],
-            storage_half: [0.15, 0.08],
-            k_speed: 0.5,
-            dt: 0.1,
-        };
+        let gp = crate::controller::tests::params(0.5);
         let mut b = Brain::new(world(), Box::new(GreedyController::new(gp)), 0.5);
         let r = b.tick(0.0);
         assert_eq!(r.outcome, Outcome::OwnStale(OwnStale::NoPose));
