@@ -18,7 +18,7 @@ use crate::error::{check_len, PolicyError};
 use crate::head::{HeadCache, RecurrentHead};
 use crate::mlp_base::{MlpBase, MlpCache};
 use crate::nn::{
-    clip_grad_norm, sized, tanh, Adam, AdamConfig, Init, LayerNorm, LayerNormConfig, Linear,
+    clip_grad_norm, sized, tanh, Adam, AdamConfig, Init, Kv, LayerNorm, LayerNormConfig, Linear,
     LinearConfig, MhaCache, MhaConfig, MultiHeadAttention, ParamStore, Slot,
 };
 use obs::{FlatLayout, ObsBatch};
@@ -223,7 +223,7 @@ impl Critic {
                     row.copy_from_slice(&p[query.r()]);
                 }
                 let g = sized(&mut c.g, envs * d);
-                att.forward(p, q_in, &c.enc.out, envs, n, &mut c.att, g);
+                att.forward(p, q_in, Kv::Rows(&c.enc.out), envs, n, &mut c.att, g);
                 let cat = sized(&mut c.cat, rows * 2 * d);
                 for r in 0..rows {
                     let e = r / n;
@@ -336,7 +336,16 @@ impl Critic {
                 d_q.iter_mut().for_each(|v| *v = 0.0);
                 let d_enc2 = sized(&mut c.d_enc2, rows * d);
                 att.backward(
-                    p, g, &c.q_in, &c.enc.out, envs, n, &mut c.att, d_g, d_q, d_enc2,
+                    p,
+                    g,
+                    &c.q_in,
+                    Kv::Rows(&c.enc.out),
+                    envs,
+                    n,
+                    &mut c.att,
+                    d_g,
+                    d_q,
+                    Some(d_enc2),
                 );
                 let gq = &mut g[query.r()];
                 for row in d_q.chunks_exact(d) {

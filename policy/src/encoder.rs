@@ -2,10 +2,12 @@
 //! one Linear+ReLU encoder per entity type to d; one MHA per group (machines, storages,
 //! peers) with the robot's own embedding as the query; concat [self, att_m, att_s, att_p]
 //! (4d) -> Linear -> Tanh -> LayerNorm. Any counts work, including 0 of a group.
+//! The entity embeddings are never stored for the whole batch: the attention computes
+//! each row's from the raw features ([`Kv::Encoded`]).
 
 use crate::nn::{
-    relu, sized, tanh, Init, LayerNorm, LayerNormConfig, Linear, LinearConfig, MhaCache, MhaConfig,
-    MultiHeadAttention, ParamStore,
+    relu, sized, tanh, Init, Kv, LayerNorm, LayerNormConfig, Linear, LinearConfig, MhaCache,
+    MhaConfig, MultiHeadAttention, ParamStore,
 };
 use obs::{ObsBatch, MACHINE_DIM, PEER_DIM, SELF_DIM, STORAGE_DIM};
 use rand::Rng;
@@ -27,7 +29,6 @@ pub struct EncoderCache {
     n: usize,
     s: [usize; 3],
     e_self: Vec<f32>,
-    e_ent: [Vec<f32>; 3],
     att_out: [Vec<f32>; 3],
     att: [MhaCache; 3],
     cat: Vec<f32>,
@@ -39,7 +40,6 @@ pub struct EncoderCache {
     d_cat: Vec<f32>,
     d_self: Vec<f32>,
     d_att: Vec<f32>,
-    d_ent: Vec<f32>,
 }
 
 const GROUPS: [&str; 3] = ["machines", "storages", "peers"];
@@ -126,11 +126,13 @@ impl SmappoEncoder {
         for k in 0..3 {
             let (x, s) = group(obs, k);
             c.s[k] = s;
-            let e = sized(&mut c.e_ent[k], n * s * d);
-            self.ent_enc[k].forward(p, x, n * s, e);
-            relu::forward(e);
+            // the entity embeddings are computed inside the attention, row by row
+            let kv = Kv::Encoded {
+                x,
+                enc: &self.ent_enc[k],
+            };
             let ao = sized(&mut c.att_out[k], n * d);
-            self.att[k].forward(p, e_self, e, n, s, &mut c.att[k], ao);
+            self.att[k].forward(p, e_self, kv, n, s, &mut c.att[k], ao);
             for r in 0..n {
                 let o = r * 4 * d + (k + 1) * d;
                 cat[o..o + d].copy_from_slice(&ao[r * d..(r + 1) * d]);
@@ -172,24 +174,23 @@ impl SmappoEncoder {
                 let o = r * 4 * d + (k + 1) * d;
                 d_att[r * d..(r + 1) * d].copy_from_slice(&d_cat[o..o + d]);
             }
-            let d_ent = sized(&mut c.d_ent, n * s * d);
+            let (x, _) = group(obs, k);
+            let kv = Kv::Encoded {
+                x,
+                enc: &self.ent_enc[k],
+            };
             self.att[k].backward(
                 p,
                 g,
                 &c.e_self,
-                &c.e_ent[k],
+                kv,
                 n,
                 s,
                 &mut c.att[k],
                 d_att,
                 d_self,
-                d_ent,
+                None,
             );
-            if s > 0 {
-                relu::backward(&c.e_ent[k], d_ent);
-                let (x, _) = group(obs, k);
-                self.ent_enc[k].backward(p, g, x, d_ent, n * s, None, false);
-            }
         }
         relu::backward(&c.e_self, d_self);
         self.self_enc

@@ -9,14 +9,20 @@
 //! it, in PyTorch too) at S*H*E instead of S*E*E multiply-adds per row.
 //!
 //! With S = 0 the attention result is a zero vector, so the output is `out_proj.bias`.
+//!
+//! The per-row middle part (scores, softmax, weighted sums and their backward) runs over
+//! chunks of rows on rayon's pool, each chunk compiled for the best instruction set found
+//! at run time (see `simd`); the projections around it are GEMMs over the whole batch.
 
-use super::dot;
 use super::gemm::{gemm, rm, tr, View};
 use super::init::Init;
 use super::linear::{Linear, LinearConfig};
 use super::params::{ParamStore, Slot};
+use super::simd::dispatch;
 use rand::Rng;
+use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
+use std::cell::RefCell;
 
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct MhaConfig {
@@ -32,6 +38,18 @@ pub struct MultiHeadAttention {
     pub out: Linear,
 }
 
+/// Where the S keys/values of each row come from.
+#[derive(Debug, Clone, Copy)]
+pub enum Kv<'a> {
+    /// Given rows: (B*S) x E.
+    Rows(&'a [f32]),
+    /// ReLU(enc(x)) of raw entity features x ((B*S) x d_in, d_in <= 4), computed per row
+    /// and never stored: the whole batch's embeddings (B*S*E floats, gigabytes at 100
+    /// robots) would be written once and read four times, where a row's S x E block stays
+    /// in L1. Backward recomputes them and accumulates `enc`'s gradients.
+    Encoded { x: &'a [f32], enc: &'a Linear },
+}
+
 /// Activations (forward) and scratch (backward) of one attention instance.
 #[derive(Debug, Clone, Default)]
 pub struct MhaCache {
@@ -44,19 +62,185 @@ pub struct MhaCache {
     d_ebar: Vec<f32>,
     d_u: Vec<f32>,
     d_q: Vec<f32>,
-    ds: Vec<f32>,
+    enc_t: Vec<f32>,    // d_in x E: the entity encoder's weight, transposed
+    partials: Vec<f32>, // chunks x (d_in + 1) x E: entity-encoder gradient per row chunk
 }
 
-#[inline]
+/// Rows per parallel work item. Fixed (never derived from the thread count), and each
+/// chunk's parameter-gradient partial is summed in chunk order, so results are
+/// bit-identical for any number of threads.
+const ROW_CHUNK: usize = 32;
+
+thread_local! {
+    /// Per-thread row scratch: keys/values, their gradient, and score gradients.
+    static SCRATCH: RefCell<Vec<f32>> = const { RefCell::new(Vec::new()) };
+}
+
+fn sized(v: &mut Vec<f32>, n: usize) -> &mut [f32] {
+    v.resize(n, 0.0);
+    &mut v[..n]
+}
+
+/// Dot product in the summation order of [`super::dot`] (8 lanes, fixed combine), inlined
+/// into the dispatched kernels so it is compiled for their instruction set.
+#[inline(always)]
+fn dot(a: &[f32], b: &[f32]) -> f32 {
+    let n = a.len().min(b.len());
+    let (a, b) = (&a[..n], &b[..n]);
+    let mut acc = [0.0f32; 8];
+    let (ca, cb) = (a.chunks_exact(8), b.chunks_exact(8));
+    let (ra, rb) = (ca.remainder(), cb.remainder());
+    for (x, y) in ca.zip(cb) {
+        for i in 0..8 {
+            acc[i] += x[i] * y[i];
+        }
+    }
+    let mut s = (acc[0] + acc[4]) + (acc[1] + acc[5]) + ((acc[2] + acc[6]) + (acc[3] + acc[7]));
+    for (x, y) in ra.iter().zip(rb) {
+        s += x * y;
+    }
+    s
+}
+
+#[inline(always)]
 fn axpy(y: &mut [f32], alpha: f32, x: &[f32]) {
     for (a, b) in y.iter_mut().zip(x) {
         *a += alpha * b;
     }
 }
 
-fn sized(v: &mut Vec<f32>, n: usize) -> &mut [f32] {
-    v.resize(n, 0.0);
-    &mut v[..n]
+dispatch! {
+    /// One row's keys/values from raw features: out[j] = relu(bias + sum_i x[j, i] wt[i]),
+    /// summed in the order of `Linear::forward`'s small-input path (bit-identical to
+    /// Linear + ReLU).
+    fn encode_row(x: &[f32], k: usize, wt: &[f32], bias: &[f32], e: usize, s: usize, out: &mut [f32]) {
+        for j in 0..s {
+            let xj = &x[j * k..(j + 1) * k];
+            let o = &mut out[j * e..(j + 1) * e];
+            o.iter_mut().for_each(|v| *v = 0.0);
+            for (i, &xi) in xj.iter().enumerate() {
+                axpy(o, xi, &wt[i * e..(i + 1) * e]);
+            }
+            for (v, b) in o.iter_mut().zip(bias) {
+                *v = (b + *v).max(0.0);
+            }
+        }
+    }
+}
+
+dispatch! {
+    /// Softmax weights `a` (H x S) and weighted sums `eb` (H x E) of one row.
+    fn fwd_row(u: &[f32], kr: &[f32], a: &mut [f32], eb: &mut [f32], h: usize, e: usize, s: usize) {
+        for hh in 0..h {
+            let ur = &u[hh * e..(hh + 1) * e];
+            let ar = &mut a[hh * s..(hh + 1) * s];
+            let mut mx = f32::NEG_INFINITY;
+            for j in 0..s {
+                ar[j] = dot(ur, &kr[j * e..(j + 1) * e]);
+                mx = mx.max(ar[j]);
+            }
+            let mut sum = 0.0;
+            for v in ar.iter_mut() {
+                *v = (*v - mx).exp();
+                sum += *v;
+            }
+            let inv = 1.0 / sum;
+            let er = &mut eb[hh * e..(hh + 1) * e];
+            er.iter_mut().for_each(|x| *x = 0.0);
+            for j in 0..s {
+                ar[j] *= inv;
+                axpy(er, ar[j], &kr[j * e..(j + 1) * e]);
+            }
+        }
+    }
+}
+
+dispatch! {
+    /// Backward of [`fwd_row`]: writes du (H x E) and dkr (S x E); `ds` is S scratch.
+    fn bwd_row(
+        a: &[f32],
+        de_all: &[f32],
+        u: &[f32],
+        kr: &[f32],
+        du_all: &mut [f32],
+        dkr: &mut [f32],
+        ds: &mut [f32],
+        h: usize,
+        e: usize,
+        s: usize,
+    ) {
+        dkr[..s * e].iter_mut().for_each(|x| *x = 0.0);
+        for hh in 0..h {
+            let ar = &a[hh * s..(hh + 1) * s];
+            let de = &de_all[hh * e..(hh + 1) * e];
+            let ur = &u[hh * e..(hh + 1) * e];
+            // dA_j and its softmax-weighted mean
+            let mut mean = 0.0;
+            for j in 0..s {
+                ds[j] = dot(de, &kr[j * e..(j + 1) * e]);
+                mean += ar[j] * ds[j];
+            }
+            let du = &mut du_all[hh * e..(hh + 1) * e];
+            du.iter_mut().for_each(|x| *x = 0.0);
+            for j in 0..s {
+                let dsj = ar[j] * (ds[j] - mean);
+                let kj = &kr[j * e..(j + 1) * e];
+                axpy(du, dsj, kj);
+                let dkj = &mut dkr[j * e..(j + 1) * e];
+                for i in 0..e {
+                    dkj[i] += ar[j] * de[i] + dsj * ur[i];
+                }
+            }
+        }
+    }
+}
+
+dispatch! {
+    /// Entity encoder gradient of one row: dkr is masked by the ReLU (kr = its output) and
+    /// accumulated as acc[i] += x[j, i] * dkr[j] (i < k), acc[k] += dkr[j].
+    fn enc_grad_row(x: &[f32], k: usize, kr: &[f32], dkr: &mut [f32], acc: &mut [f32], e: usize, s: usize) {
+        for j in 0..s {
+            let ej = &kr[j * e..(j + 1) * e];
+            let dj = &mut dkr[j * e..(j + 1) * e];
+            for (d, &v) in dj.iter_mut().zip(ej) {
+                if v <= 0.0 {
+                    *d = 0.0;
+                }
+            }
+            let xj = &x[j * k..(j + 1) * k];
+            for (i, &xi) in xj.iter().enumerate() {
+                axpy(&mut acc[i * e..(i + 1) * e], xi, dj);
+            }
+            for (g, d) in acc[k * e..(k + 1) * e].iter_mut().zip(dj.iter()) {
+                *g += d;
+            }
+        }
+    }
+}
+
+/// Run `f(chunk_index, a_chunk, b_chunk)` over matching chunks of [`ROW_CHUNK`] rows of `a`
+/// (`la` per row) and `b` (`lb` per chunk row, or `lb` per chunk when `per_chunk`), on
+/// rayon's pool when there is more than one chunk: single-row inference never touches the
+/// thread pool (nor allocates).
+#[allow(clippy::too_many_arguments)]
+fn for_row_chunks(
+    rows: usize,
+    a: &mut [f32],
+    la: usize,
+    b: &mut [f32],
+    lb: usize,
+    per_chunk: bool,
+    f: impl Fn(usize, &mut [f32], &mut [f32]) + Sync,
+) {
+    let cb = if per_chunk { lb } else { ROW_CHUNK * lb };
+    if rows <= ROW_CHUNK {
+        f(0, a, b);
+    } else {
+        a.par_chunks_mut(ROW_CHUNK * la)
+            .zip(b.par_chunks_mut(cb))
+            .enumerate()
+            .for_each(|(i, (x, y))| f(i, x, y));
+    }
 }
 
 impl MultiHeadAttention {
@@ -95,14 +279,33 @@ impl MultiHeadAttention {
         self.cfg.dim / self.cfg.heads
     }
 
-    /// out[b] = MHA(query = q_in[b], keys = values = kv[b, 0..s]).
-    /// q_in: B x E, kv: (B*s) x E, out: B x E.
+    /// Transposed entity-encoder weight (d_in x E) into `enc_t`; returns d_in (0 for rows).
+    fn prepare_kv(&self, p: &[f32], kv: Kv, enc_t: &mut Vec<f32>) -> usize {
+        match kv {
+            Kv::Rows(_) => 0,
+            Kv::Encoded { enc, .. } => {
+                let (k, e) = (enc.cfg.d_in, self.cfg.dim);
+                assert!(k <= 4 && enc.cfg.d_out == e, "entity encoder {k} -> E");
+                let w = &p[enc.w.r()];
+                let wt = sized(enc_t, k * e);
+                for o in 0..e {
+                    for i in 0..k {
+                        wt[i * e + o] = w[o * k + i];
+                    }
+                }
+                k
+            }
+        }
+    }
+
+    /// out[b] = MHA(query = q_in[b], keys = values = the S entities of row b).
+    /// q_in: B x E, out: B x E.
     #[allow(clippy::too_many_arguments)]
     pub fn forward(
         &self,
         p: &[f32],
         q_in: &[f32],
-        kv: &[f32],
+        kv: Kv,
         b: usize,
         s: usize,
         c: &mut MhaCache,
@@ -117,6 +320,7 @@ impl MultiHeadAttention {
             self.out.forward(p, o, b, out);
             return;
         }
+        let k = self.prepare_kv(p, kv, &mut c.enc_t);
         let scale = 1.0 / (dh as f32).sqrt();
         // Q = q_in Wq^T + bq
         let q = sized(&mut c.q, b * e);
@@ -135,33 +339,27 @@ impl MultiHeadAttention {
             };
             gemm(b, dh, e, scale, qv, rm(wk, e), 0.0, &mut u[hh * e..], h * e);
         }
-        // softmax(U . e_j) and ebar = sum_j a_j e_j
+        // softmax(U . e_j) and ebar = sum_j a_j e_j, row by row
         let a = sized(&mut c.a, b * h * s);
         let ebar = sized(&mut c.ebar, b * h * e);
-        for r in 0..b {
-            let kr = &kv[r * s * e..(r + 1) * s * e];
-            for hh in 0..h {
-                let ur = &u[(r * h + hh) * e..(r * h + hh + 1) * e];
-                let ar = &mut a[(r * h + hh) * s..(r * h + hh + 1) * s];
-                let mut mx = f32::NEG_INFINITY;
-                for j in 0..s {
-                    ar[j] = dot(ur, &kr[j * e..(j + 1) * e]);
-                    mx = mx.max(ar[j]);
+        let (u, wt) = (&*u, &c.enc_t);
+        for_row_chunks(b, a, h * s, ebar, h * e, false, |ci, ac, ec| {
+            SCRATCH.with_borrow_mut(|scr| {
+                let kbuf = sized(scr, s * e);
+                for (i, (ar, er)) in ac.chunks_mut(h * s).zip(ec.chunks_mut(h * e)).enumerate() {
+                    let r = ci * ROW_CHUNK + i;
+                    let kr: &[f32] = match kv {
+                        Kv::Rows(x) => &x[r * s * e..(r + 1) * s * e],
+                        Kv::Encoded { x, enc } => {
+                            let xr = &x[r * s * k..(r + 1) * s * k];
+                            encode_row(xr, k, wt, &p[enc.b.r()], e, s, kbuf);
+                            kbuf
+                        }
+                    };
+                    fwd_row(&u[r * h * e..(r + 1) * h * e], kr, ar, er, h, e, s);
                 }
-                let mut sum = 0.0;
-                for v in ar.iter_mut() {
-                    *v = (*v - mx).exp();
-                    sum += *v;
-                }
-                let inv = 1.0 / sum;
-                let er = &mut ebar[(r * h + hh) * e..(r * h + hh + 1) * e];
-                er.iter_mut().for_each(|x| *x = 0.0);
-                for j in 0..s {
-                    ar[j] *= inv;
-                    axpy(er, ar[j], &kr[j * e..(j + 1) * e]);
-                }
-            }
-        }
+            })
+        });
         // O[:, head hh] = ebar_h Wv_h^T + bv_h
         for row in o.chunks_exact_mut(e) {
             row.copy_from_slice(&bias[2 * e..3 * e]);
@@ -179,20 +377,21 @@ impl MultiHeadAttention {
     }
 
     /// Backward of [`forward`](Self::forward) (same inputs, cache from it).
-    /// Accumulates parameter grads, ADDS into `dq_in` (B x E) and WRITES `dkv` ((B*s) x E).
+    /// Accumulates parameter grads (including the entity encoder's for [`Kv::Encoded`]),
+    /// ADDS into `dq_in` (B x E) and, for [`Kv::Rows`], WRITES `dkv` ((B*s) x E).
     #[allow(clippy::too_many_arguments)]
     pub fn backward(
         &self,
         p: &[f32],
         g: &mut [f32],
         q_in: &[f32],
-        kv: &[f32],
+        kv: Kv,
         b: usize,
         s: usize,
         c: &mut MhaCache,
         dout: &[f32],
         dq_in: &mut [f32],
-        dkv: &mut [f32],
+        dkv: Option<&mut [f32]>,
     ) {
         let (e, h, dh) = (self.cfg.dim, self.cfg.heads, self.dh());
         let d_o = sized(&mut c.d_o, b * e);
@@ -200,9 +399,10 @@ impl MultiHeadAttention {
         if s == 0 {
             return;
         }
+        let k = self.prepare_kv(p, kv, &mut c.enc_t);
         let scale = 1.0 / (dh as f32).sqrt();
         let w = &p[self.in_w.r()];
-        let (q, u, a, ebar) = (&c.q, &c.u, &c.a, &c.ebar);
+        let (u, a, ebar) = (&c.u, &c.a, &c.ebar);
         // value path
         let d_ebar = sized(&mut c.d_ebar, b * h * e);
         {
@@ -246,38 +446,70 @@ impl MultiHeadAttention {
                 }
             }
         }
-        // softmax / score path, per row and head
+        // softmax / score path, row by row
         let d_u = sized(&mut c.d_u, b * h * e);
-        let ds = sized(&mut c.ds, s);
-        dkv[..b * s * e].iter_mut().for_each(|x| *x = 0.0);
-        for r in 0..b {
-            let kr = &kv[r * s * e..(r + 1) * s * e];
-            let dkr = &mut dkv[r * s * e..(r + 1) * s * e];
-            for hh in 0..h {
-                let base = (r * h + hh) * e;
-                let ar = &a[(r * h + hh) * s..(r * h + hh + 1) * s];
-                let de = &d_ebar[base..base + e];
-                let ur = &u[base..base + e];
-                // dA_j and its softmax-weighted mean
-                let mut mean = 0.0;
-                for j in 0..s {
-                    ds[j] = dot(de, &kr[j * e..(j + 1) * e]);
-                    mean += ar[j] * ds[j];
+        let n_chunks = b.div_ceil(ROW_CHUNK);
+        let d_ebar = &*d_ebar;
+        let wt = &c.enc_t;
+        // per chunk: its d_u rows and either its dkv rows or its encoder-gradient partial
+        let part_len = (k + 1) * e;
+        let run = |ci: usize, du_c: &mut [f32], dk_c: &mut [f32]| {
+            SCRATCH.with_borrow_mut(|scr| {
+                let need = 2 * s * e + s;
+                if scr.len() < need {
+                    scr.resize(need, 0.0);
                 }
-                let du = &mut d_u[base..base + e];
-                du.iter_mut().for_each(|x| *x = 0.0);
-                for j in 0..s {
-                    let dsj = ar[j] * (ds[j] - mean);
-                    let kj = &kr[j * e..(j + 1) * e];
-                    axpy(du, dsj, kj);
-                    let dkj = &mut dkr[j * e..(j + 1) * e];
-                    for i in 0..e {
-                        dkj[i] += ar[j] * de[i] + dsj * ur[i];
+                let (kbuf, rest) = scr.split_at_mut(s * e);
+                let (dkbuf, ds) = rest.split_at_mut(s * e);
+                if let Kv::Encoded { .. } = kv {
+                    dk_c.iter_mut().for_each(|x| *x = 0.0);
+                }
+                for (i, du) in du_c.chunks_mut(h * e).enumerate() {
+                    let r = ci * ROW_CHUNK + i;
+                    let (ar, de, ur) = (
+                        &a[r * h * s..(r + 1) * h * s],
+                        &d_ebar[r * h * e..(r + 1) * h * e],
+                        &u[r * h * e..(r + 1) * h * e],
+                    );
+                    match kv {
+                        Kv::Rows(x) => {
+                            let kr = &x[r * s * e..(r + 1) * s * e];
+                            let dkr = &mut dk_c[i * s * e..(i + 1) * s * e];
+                            bwd_row(ar, de, ur, kr, du, dkr, ds, h, e, s);
+                        }
+                        Kv::Encoded { x, enc } => {
+                            let xr = &x[r * s * k..(r + 1) * s * k];
+                            encode_row(xr, k, wt, &p[enc.b.r()], e, s, kbuf);
+                            bwd_row(ar, de, ur, kbuf, du, dkbuf, ds, h, e, s);
+                            enc_grad_row(xr, k, kbuf, dkbuf, dk_c, e, s);
+                        }
+                    }
+                }
+            })
+        };
+        match kv {
+            Kv::Rows(_) => {
+                let dkv = dkv.expect("Kv::Rows needs dkv");
+                let dkv = &mut dkv[..b * s * e];
+                for_row_chunks(b, d_u, h * e, dkv, s * e, false, run);
+            }
+            Kv::Encoded { enc, .. } => {
+                let parts = sized(&mut c.partials, n_chunks * part_len);
+                for_row_chunks(b, d_u, h * e, parts, part_len, true, run);
+                // chunk partials in chunk order: the same sum for any thread count
+                let (gw, gb) = (enc.w.r(), enc.b.r());
+                for pc in c.partials.chunks_exact(part_len) {
+                    for o in 0..e {
+                        for i in 0..k {
+                            g[gw.start + o * k + i] += pc[i * e + o];
+                        }
+                        g[gb.start + o] += pc[k * e + o];
                     }
                 }
             }
         }
         // U = scale * Q_h Wk_h
+        let (d_u, q) = (&c.d_u, &c.q);
         let d_q = sized(&mut c.d_q, b * e);
         {
             let gw = &mut g[self.in_w.r()];
@@ -420,7 +652,7 @@ mod tests {
             let kv = rand_vec(b * s * 8, 2);
             let mut c = MhaCache::default();
             let mut out = vec![0.0; b * 8];
-            m.forward(&st.data, &q_in, &kv, b, s, &mut c, &mut out);
+            m.forward(&st.data, &q_in, Kv::Rows(&kv), b, s, &mut c, &mut out);
             let want = naive(&m, &st.data, &q_in, &kv, b, s);
             for (x, y) in out.iter().zip(&want) {
                 assert!((*x as f64 - y).abs() < 1e-5, "s={s}: {x} vs {y}");
@@ -441,16 +673,27 @@ mod tests {
         let run = |p: &[f32], q: &[f32], k: &[f32]| {
             let mut c = MhaCache::default();
             let mut out = vec![0.0; b * 8];
-            m.forward(p, q, k, b, s, &mut c, &mut out);
+            m.forward(p, q, Kv::Rows(k), b, s, &mut c, &mut out);
             dot_loss(&out, &r)
         };
         let mut c = MhaCache::default();
         let mut out = vec![0.0; b * 8];
-        m.forward(&st.data, &q_in, &kv, b, s, &mut c, &mut out);
+        m.forward(&st.data, &q_in, Kv::Rows(&kv), b, s, &mut c, &mut out);
         let mut dq = vec![0.0; b * 8];
         let mut dkv = vec![0.0; b * s * 8];
         let (p, g) = st.split();
-        m.backward(p, g, &q_in, &kv, b, s, &mut c, &r, &mut dq, &mut dkv);
+        m.backward(
+            p,
+            g,
+            &q_in,
+            Kv::Rows(&kv),
+            b,
+            s,
+            &mut c,
+            &r,
+            &mut dq,
+            Some(&mut dkv),
+        );
         let num_p = numeric_grad(&mut st.data.clone(), |p| run(p, &q_in, &kv));
         assert_grad_close("params", &st.grad, &num_p);
         let num_q = numeric_grad(&mut q_in.clone(), |q| run(&st.data, q, &kv));
@@ -474,23 +717,105 @@ mod tests {
         let q_in = rand_vec(b * 8, 3);
         let mut c = MhaCache::default();
         let mut out = vec![0.0; b * 8];
-        m.forward(&st.data, &q_in, &[], b, 0, &mut c, &mut out);
+        m.forward(&st.data, &q_in, Kv::Rows(&[]), b, 0, &mut c, &mut out);
         let mut dq = vec![0.0; b * 8];
         let (p, g) = st.split();
         m.backward(
             p,
             g,
             &q_in,
-            &[],
+            Kv::Rows(&[]),
             b,
             0,
             &mut c,
             &rand_vec(b * 8, 9),
             &mut dq,
-            &mut [],
+            Some(&mut []),
         );
         assert!(dq.iter().all(|x| *x == 0.0));
         assert!(st.grad[m.in_w.r()].iter().all(|x| *x == 0.0));
         assert!(st.grad[m.out.b.r()].iter().any(|x| *x != 0.0));
+    }
+
+    /// The fused entity-encoder path against the old two-step one (Linear + ReLU rows,
+    /// then attention over them): forward bit-identical, gradients equal up to the
+    /// summation order of the encoder's weight gradient (row chunks), for batches that
+    /// span several chunks, at every SIMD level and on 1 and 2 threads.
+    #[test]
+    fn encoded_kv_matches_stored_rows_at_every_level_and_thread_count() {
+        use crate::nn::relu;
+        use crate::nn::simd::tests::at_every_level;
+        let mut rng = rand::rngs::StdRng::seed_from_u64(7);
+        let (mut st, m) = make(64, 4);
+        let enc = Linear::new(
+            LinearConfig {
+                d_in: 3,
+                d_out: 64,
+                init: Init::Orthogonal { gain: 1.4 },
+            },
+            &mut st,
+            "enc",
+            &mut rng,
+        );
+        let rb = rand_vec(64, 8);
+        st.data[enc.b.r()].copy_from_slice(&rb.iter().map(|v| 0.1 * v).collect::<Vec<_>>());
+        let (b, s) = (3 * ROW_CHUNK + 5, 7);
+        let q_in = rand_vec(b * 64, 1);
+        let x = rand_vec(b * s * 3, 2);
+        let r = rand_vec(b * 64, 3);
+        // reference: stored rows
+        let mut e = vec![0.0; b * s * 64];
+        enc.forward(&st.data, &x, b * s, &mut e);
+        relu::forward(&mut e);
+        let mut c = MhaCache::default();
+        let mut want = vec![0.0; b * 64];
+        m.forward(&st.data, &q_in, Kv::Rows(&e), b, s, &mut c, &mut want);
+        let mut g_ref = vec![0.0; st.len()];
+        let mut dq_ref = vec![0.0; b * 64];
+        let mut de = vec![0.0; b * s * 64];
+        m.backward(
+            &st.data,
+            &mut g_ref,
+            &q_in,
+            Kv::Rows(&e),
+            b,
+            s,
+            &mut c,
+            &r,
+            &mut dq_ref,
+            Some(&mut de),
+        );
+        relu::backward(&e, &mut de);
+        enc.backward(&st.data, &mut g_ref, &x, &de, b * s, None, false);
+        let run = || {
+            let mut c = MhaCache::default();
+            let mut out = vec![0.0; b * 64];
+            let kv = Kv::Encoded { x: &x, enc: &enc };
+            m.forward(&st.data, &q_in, kv, b, s, &mut c, &mut out);
+            let mut g = vec![0.0; st.len()];
+            let mut dq = vec![0.0; b * 64];
+            m.backward(&st.data, &mut g, &q_in, kv, b, s, &mut c, &r, &mut dq, None);
+            (out, g, dq)
+        };
+        let mut results = at_every_level(run);
+        for threads in [1, 2] {
+            let pool = rayon::ThreadPoolBuilder::new()
+                .num_threads(threads)
+                .build()
+                .unwrap();
+            results.push(pool.install(run));
+        }
+        for (out, g, dq) in &results {
+            assert_eq!(out, &want, "forward is bit-identical");
+            assert_eq!(dq, &dq_ref, "query gradient is bit-identical");
+            assert_eq!(
+                g, &results[0].1,
+                "same bits at every level and thread count"
+            );
+            let scale = g_ref.iter().fold(0.0f32, |m, v| m.max(v.abs()));
+            for (i, (x, y)) in g.iter().zip(&g_ref).enumerate() {
+                assert!((x - y).abs() <= 1e-5 * scale, "grad[{i}] {x} vs {y}");
+            }
+        }
     }
 }

@@ -18,10 +18,11 @@ pub mod layernorm;
 pub mod linear;
 pub mod params;
 pub mod relu;
+pub mod simd;
 pub mod tanh;
 
 pub use adam::{clip_grad_norm, Adam, AdamConfig};
-pub use attention::{MhaCache, MhaConfig, MultiHeadAttention};
+pub use attention::{Kv, MhaCache, MhaConfig, MultiHeadAttention};
 pub use gru::{Gru, GruCache, GruConfig};
 pub use init::Init;
 pub use layernorm::{LayerNorm, LayerNormConfig};
