@@ -708,14 +708,21 @@ impl Discovery {
     // but better make sure.
     // TODO: Check if there can acually be any. If not, then this code is
     // unnecessary.
-    let db = discovery_db_read(&self.discovery_db);
-    for reader in db.get_all_local_topic_readers() {
+    // Copied out so that no DiscoveryDB lock is held while writing to SEDP
+    // (a write may block on dp_event_loop; see add_local_writer()).
+    let (readers, writers): (Vec<DiscoveredReaderData>, Vec<DiscoveredWriterData>) = {
+      let db = discovery_db_read(&self.discovery_db);
+      (
+        db.get_all_local_topic_readers().cloned().collect(),
+        db.get_all_local_topic_writers().cloned().collect(),
+      )
+    };
+    for reader in &readers {
       self.sedp_publish_single_user_reader(reader);
     }
-    for writer in db.get_all_local_topic_writers() {
+    for writer in &writers {
       self.sedp_publish_single_user_writer(writer);
     }
-    drop(db);
 
     if self.discovery_started_sender.send(Ok(())).is_err() {
       error!("Discovery start notification send failed: main thread receiver dropped");
@@ -1143,14 +1150,19 @@ impl Discovery {
   }
 
   fn on_participant_shutting_down(&mut self) {
-    let db = discovery_db_read(&self.discovery_db);
-
-    for reader in db.get_all_local_topic_readers() {
-      self.send_endpoint_dispose_message(reader.reader_proxy.remote_reader_guid);
-    }
-
-    for writer in db.get_all_local_topic_writers() {
-      self.send_endpoint_dispose_message(writer.writer_proxy.remote_writer_guid);
+    // GUIDs copied out: no DiscoveryDB lock held while writing (see add_local_writer()).
+    let endpoint_guids: Vec<GUID> = {
+      let db = discovery_db_read(&self.discovery_db);
+      db.get_all_local_topic_readers()
+        .map(|r| r.reader_proxy.remote_reader_guid)
+        .chain(
+          db.get_all_local_topic_writers()
+            .map(|w| w.writer_proxy.remote_writer_guid),
+        )
+        .collect()
+    };
+    for guid in endpoint_guids {
+      self.send_endpoint_dispose_message(guid);
     }
 
     self
@@ -1830,50 +1842,26 @@ impl Discovery {
   }
 
   fn add_local_writer(&self, guid: GUID) {
-    // Get writer data from db
-    let db = discovery_db_read(&self.discovery_db);
-    let writer_data = match db.get_local_topic_writer(guid) {
-      Some(d) => d,
-      None => {
-        warn!("Did not find a local writer {guid:?}");
-        return;
-      }
-    };
-
-    // Publish it to SEDP (if needed)
-    self.sedp_publish_single_user_writer(writer_data);
-
-    // Send the ReaderUpdated notification on any existing readers on the writer's
-    // topic This will result in matching the endpoints if possible
-    let existing_readers = db.readers_on_topic(writer_data.publication_topic_data.topic_name());
-    for reader in existing_readers {
-      self.send_discovery_notification(DiscoveryNotificationType::ReaderUpdated {
-        discovered_reader_data: reader.clone(),
-      });
+    let found = announce_local_writer(
+      &self.discovery_db,
+      guid,
+      |writer_data| self.sedp_publish_single_user_writer(writer_data),
+      |notification| self.send_discovery_notification(notification),
+    );
+    if !found {
+      warn!("Did not find a local writer {guid:?}");
     }
   }
 
   fn add_local_reader(&self, guid: GUID) {
-    // Get reader data from db
-    let db = discovery_db_read(&self.discovery_db);
-    let reader_data = match db.get_local_topic_reader(guid) {
-      Some(d) => d,
-      None => {
-        warn!("Did not find a local reader {guid:?}");
-        return;
-      }
-    };
-
-    // Publish it to SEDP (if needed)
-    self.sedp_publish_single_user_reader(reader_data);
-
-    // Send the WriterUpdated notification on any existing writers on the readers's
-    // topic This will result in matching the endpoints if possible
-    let existing_writers = db.writers_on_topic(reader_data.subscription_topic_data.topic_name());
-    for writer in existing_writers {
-      self.send_discovery_notification(DiscoveryNotificationType::WriterUpdated {
-        discovered_writer_data: writer.clone(),
-      });
+    let found = announce_local_reader(
+      &self.discovery_db,
+      guid,
+      |reader_data| self.sedp_publish_single_user_reader(reader_data),
+      |notification| self.send_discovery_notification(notification),
+    );
+    if !found {
+      warn!("Did not find a local reader {guid:?}");
     }
   }
 
@@ -1930,11 +1918,14 @@ impl Discovery {
   }
 
   pub fn sedp_publish_topic(&self, topic_name: &str) {
-    let db = discovery_db_read(&self.discovery_db);
     // We might have multiple topics with the same name (but different Qos etc..),
     // and the following call gets just one of them. Should we publish all of
     // them or is this enough?
-    let topic_data = match db.get_topic(topic_name) {
+    // Copied out: no DiscoveryDB lock held while writing (see add_local_writer()).
+    let topic_data_opt = discovery_db_read(&self.discovery_db)
+      .get_topic(topic_name)
+      .cloned();
+    let topic_data = match topic_data_opt {
       Some(data) => data,
       None => {
         warn!("Did not find topic data with topic name {topic_name}");
@@ -1948,7 +1939,7 @@ impl Discovery {
       return;
     }
 
-    match self.dcps_topic.writer.write(topic_data.clone(), None) {
+    match self.dcps_topic.writer.write(topic_data, None) {
       Ok(()) => {
         debug!("Published topic {topic_name} to DCPSTopic");
       }
@@ -2144,6 +2135,83 @@ impl Discovery {
       .try_send(event)
       .unwrap_or_else(|e| error!("Cannot report participant status: {e:?}"));
   }
+}
+
+// Announcing a new local endpoint: publish it to SEDP, then send one
+// notification per matching endpoint already known on its topic, so that
+// dp_event_loop matches them.
+//
+// What is needed is copied out of the DiscoveryDB under its read lock, and the
+// lock is released before publishing or notifying. Both may block: the
+// notification channel to dp_event_loop is bounded (32 slots) and a reliable
+// SEDP write waits for its send window. dp_event_loop, the only consumer of
+// that channel, takes the DiscoveryDB read lock itself (update_participant),
+// and std's RwLock lets no new reader in while a writer waits, which an
+// application thread creating a DataWriter or DataReader does. Holding the read
+// lock across a blocking send therefore deadlocks Discovery, dp_event_loop and
+// the application as soon as a topic has more matching endpoints than the
+// channel has slots (e.g. ~20 ROS 2 nodes sharing topics).
+// The sends stay blocking: a dropped notification would leave a reader and a
+// writer silently unmatched.
+
+/// Publishes local writer `guid` and notifies a `ReaderUpdated` for every
+/// reader on its topic, holding no DiscoveryDB lock while doing so. Returns
+/// false if the writer is not in the DiscoveryDB.
+pub(crate) fn announce_local_writer(
+  discovery_db: &Arc<RwLock<DiscoveryDB>>,
+  guid: GUID,
+  publish: impl FnOnce(&DiscoveredWriterData),
+  mut notify: impl FnMut(DiscoveryNotificationType),
+) -> bool {
+  let (writer_data, readers) = {
+    let db = discovery_db_read(discovery_db);
+    let Some(writer_data) = db.get_local_topic_writer(guid).cloned() else {
+      return false;
+    };
+    let readers: Vec<DiscoveredReaderData> = db
+      .readers_on_topic(writer_data.publication_topic_data.topic_name())
+      .into_iter()
+      .cloned()
+      .collect();
+    (writer_data, readers)
+  }; // read lock released here
+  publish(&writer_data);
+  for discovered_reader_data in readers {
+    notify(DiscoveryNotificationType::ReaderUpdated {
+      discovered_reader_data,
+    });
+  }
+  true
+}
+
+/// Publishes local reader `guid` and notifies a `WriterUpdated` for every
+/// writer on its topic, holding no DiscoveryDB lock while doing so; see
+/// [`announce_local_writer`].
+pub(crate) fn announce_local_reader(
+  discovery_db: &Arc<RwLock<DiscoveryDB>>,
+  guid: GUID,
+  publish: impl FnOnce(&DiscoveredReaderData),
+  mut notify: impl FnMut(DiscoveryNotificationType),
+) -> bool {
+  let (reader_data, writers) = {
+    let db = discovery_db_read(discovery_db);
+    let Some(reader_data) = db.get_local_topic_reader(guid).cloned() else {
+      return false;
+    };
+    let writers: Vec<DiscoveredWriterData> = db
+      .writers_on_topic(reader_data.subscription_topic_data.topic_name())
+      .into_iter()
+      .cloned()
+      .collect();
+    (reader_data, writers)
+  }; // read lock released here
+  publish(&reader_data);
+  for discovered_writer_data in writers {
+    notify(DiscoveryNotificationType::WriterUpdated {
+      discovered_writer_data,
+    });
+  }
+  true
 }
 
 // -----------------------------------------------------------------------
@@ -2770,5 +2838,166 @@ mod tests {
       reported.disposed(disposed_reader_guid) && reported.disposed(disposed_writer_guid),
       "the disposed reader and writer were not reported lost"
     );
+  }
+
+  // ---- start-up deadlock: no DiscoveryDB lock across a blocking send ----
+  //
+  // The three threads of the deadlock (see announce_local_writer) are played
+  // here deterministically: a thread runs the announce code against a bounded
+  // channel of the real capacity, this test is dp_event_loop (it takes one
+  // notification, then stops draining, which is what update_participant does
+  // while it waits for the read lock), and then the application thread (it
+  // needs the write lock to create an endpoint). Receiving the first
+  // notification proves the announcing thread has gathered its matches; with
+  // more matches than 1 + capacity it cannot finish until the test drains.
+
+  const NOTIFICATION_CAPACITY: usize = 32; // as in DomainParticipant::new
+  const REMOTE_READERS: usize = 2 * NOTIFICATION_CAPACITY;
+
+  // The body of add_local_writer as published in 0.15.1: the read guard lives
+  // until the end of the function, across every blocking send. Kept only to
+  // show that the test below detects the deadlock.
+  fn announce_local_writer_holding_lock(
+    discovery_db: &Arc<RwLock<DiscoveryDB>>,
+    guid: GUID,
+    mut notify: impl FnMut(DiscoveryNotificationType),
+  ) -> bool {
+    let db = discovery_db_read(discovery_db);
+    let Some(writer_data) = db.get_local_topic_writer(guid) else {
+      return false;
+    };
+    for reader in db.readers_on_topic(writer_data.publication_topic_data.topic_name()) {
+      notify(DiscoveryNotificationType::ReaderUpdated {
+        discovered_reader_data: reader.clone(),
+      });
+    }
+    true
+  }
+
+  // A DiscoveryDB holding one local writer on "Crowded" and REMOTE_READERS
+  // remote readers on the same topic. The participant must outlive the test.
+  fn crowded_topic_db(domain: u16) -> (DomainParticipant, Arc<RwLock<DiscoveryDB>>, GUID) {
+    use crate::{
+      dds::statusevents::sync_status_channel,
+      discovery::sedp_messages::{ReaderProxy, SubscriptionBuiltinTopicData},
+      structure::guid::EntityKind,
+      test::random_data::RandomData,
+      TopicKind,
+    };
+    let (db_event_sender, _) = std::sync::mpsc::sync_channel::<()>(4);
+    let (status_sender, _) = sync_status_channel(16).unwrap();
+    let mut db = DiscoveryDB::new(GUID::new_participant_guid(), db_event_sender, status_sender);
+
+    let participant = DomainParticipant::new(domain).expect("participant creation");
+    let topic = participant
+      .create_topic(
+        "Crowded".to_string(),
+        "RandomData".to_string(),
+        &QosPolicies::qos_none(),
+        TopicKind::WithKey,
+      )
+      .unwrap();
+    let publisher = participant.create_publisher(&QosPolicies::qos_none()).unwrap();
+    let writer = publisher
+      .create_datawriter_cdr::<RandomData>(&topic, None)
+      .unwrap();
+    let writer_data = DiscoveredWriterData::new(&writer, &topic, &participant, None);
+    let writer_guid = writer_data.writer_proxy.remote_writer_guid;
+    db.update_local_topic_writer(writer_data);
+
+    for i in 0..REMOTE_READERS {
+      let remote = GUID::new_participant_guid().prefix;
+      let guid = GUID::new(
+        remote,
+        EntityId::new([0, 0, i as u8], EntityKind::READER_WITH_KEY_USER_DEFINED),
+      );
+      db.update_subscription(&DiscoveredReaderData {
+        reader_proxy: ReaderProxy::new(guid, false, vec![], vec![]),
+        subscription_topic_data: SubscriptionBuiltinTopicData::new(
+          guid,
+          None,
+          "Crowded".to_string(),
+          "RandomData".to_string(),
+          &QosPolicies::qos_none(),
+          None,
+        ),
+        content_filter: None,
+        user_data: Vec::new(),
+      });
+    }
+    assert_eq!(db.readers_on_topic("Crowded").len(), REMOTE_READERS);
+    (participant, Arc::new(RwLock::new(db)), writer_guid)
+  }
+
+  // Runs `announce` on its own thread against a bounded channel, then plays
+  // dp_event_loop and the application thread. Returns whether the application
+  // got the write lock while the announcing thread was blocked on the full
+  // channel, and how many notifications were delivered in the end.
+  fn app_gets_write_lock_while_discovery_is_blocked(
+    domain: u16,
+    announce: fn(&Arc<RwLock<DiscoveryDB>>, GUID, &WakeSender<DiscoveryNotificationType>) -> bool,
+  ) -> (bool, usize) {
+    use crate::polling::{wake_channel, LoopWaker};
+    let (_participant, db, writer_guid) = crowded_topic_db(domain);
+    let (tx, rx) = wake_channel::<DiscoveryNotificationType>(NOTIFICATION_CAPACITY, &LoopWaker::new());
+    let announcer = {
+      let db = Arc::clone(&db);
+      std::thread::spawn(move || announce(&db, writer_guid, &tx))
+    };
+    let recv = || loop {
+      match rx.try_recv() {
+        Ok(n) => return Some(n),
+        Err(std::sync::mpsc::TryRecvError::Empty) => std::thread::sleep(StdDuration::from_millis(1)),
+        Err(std::sync::mpsc::TryRecvError::Disconnected) => return None,
+      }
+    };
+    // dp_event_loop takes one notification, then stops draining.
+    assert!(recv().is_some(), "no notification at all");
+    // The application asks for the write lock (with a deadline instead of
+    // waiting forever, so that the old code path fails instead of hanging).
+    let deadline = std::time::Instant::now() + StdDuration::from_secs(2);
+    let mut got_write_lock = false;
+    while std::time::Instant::now() < deadline {
+      if let Ok(guard) = db.try_write() {
+        drop(guard);
+        got_write_lock = true;
+        break;
+      }
+      std::thread::sleep(StdDuration::from_millis(1));
+    }
+    assert!(!announcer.is_finished(), "the channel never filled up: the test proves nothing");
+    // dp_event_loop drains again; every notification must arrive.
+    let mut delivered = 1;
+    while recv().is_some() {
+      delivered += 1;
+    }
+    assert!(announcer.join().unwrap(), "the local writer was not found");
+    (got_write_lock, delivered)
+  }
+
+  #[test]
+  fn announcing_a_local_writer_holds_no_lock_across_blocking_sends() {
+    let (got_write_lock, delivered) =
+      app_gets_write_lock_while_discovery_is_blocked(test_domain_id(48), |db, guid, tx| {
+        announce_local_writer(db, guid, |_| (), |n| tx.send(n).unwrap())
+      });
+    assert!(
+      got_write_lock,
+      "the DiscoveryDB stayed locked while Discovery was blocked on a full notification channel"
+    );
+    assert_eq!(delivered, REMOTE_READERS, "a notification was lost");
+  }
+
+  #[test]
+  fn the_published_announce_code_path_deadlocks_and_the_test_sees_it() {
+    let (got_write_lock, delivered) =
+      app_gets_write_lock_while_discovery_is_blocked(test_domain_id(49), |db, guid, tx| {
+        announce_local_writer_holding_lock(db, guid, |n| tx.send(n).unwrap())
+      });
+    assert!(
+      !got_write_lock,
+      "0.15.1's code path let the application in: the test no longer reproduces the deadlock"
+    );
+    assert_eq!(delivered, REMOTE_READERS);
   }
 }

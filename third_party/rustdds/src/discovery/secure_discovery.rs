@@ -1414,8 +1414,11 @@ impl SecureDiscovery {
     discovery_db: &Arc<RwLock<DiscoveryDB>>,
     discovery_updated_sender: &WakeSender<DiscoveryNotificationType>,
   ) {
-    let mut db = discovery_db_write(discovery_db);
-    db.update_authentication_status(participant_guid_prefix, new_status);
+    // Lock released before the (blocking) notification: dp_event_loop, the only
+    // consumer, takes the DiscoveryDB read lock itself (see
+    // Discovery::add_local_writer()).
+    discovery_db_write(discovery_db)
+      .update_authentication_status(participant_guid_prefix, new_status);
 
     send_discovery_notification(
       discovery_updated_sender,
