@@ -1164,7 +1164,7 @@ pub(crate) struct DomainParticipantInner {
 
   // Adding Readers
   sender_add_reader: WakeSender<ReaderIngredients>,
-  sender_remove_reader: WakeSender<GUID>,
+  sender_remove_reader: WakeUnboundedSender<GUID>,
   /// Reader-command ready queue. A send records the reader entity id.
   reader_ready: ReadySender<EntityId>,
   /// Built-in discovery readers enqueue their poll token here.
@@ -1177,7 +1177,7 @@ pub(crate) struct DomainParticipantInner {
 
   // Writers
   add_writer_sender: WakeSender<WriterIngredients>,
-  remove_writer_sender: WakeSender<GUID>,
+  remove_writer_sender: WakeUnboundedSender<GUID>,
   /// Writer doorbell ready queue. Ringing records the writer entity id.
   writer_ready: ReadySender<EntityId>,
 
@@ -1342,11 +1342,17 @@ impl DomainParticipantInner {
     // Adding readers. Capacities match the previous mio-extras channels.
     let (sender_add_reader, receiver_add_reader) =
       wake_channel::<ReaderIngredients>(100, &dp_waker);
-    let (sender_remove_reader, receiver_remove_reader) = wake_channel::<GUID>(4, &dp_waker);
+    // Removals are unbounded: a dropped DataReader/DataWriter must never block
+    // or fail to deregister. With a bounded channel (4) and a 20 ms send
+    // timeout, dropping many endpoints at once (any node shutting down) logged
+    // "Cannot remove Reader ... Full" and left the reader registered.
+    let (sender_remove_reader, receiver_remove_reader) =
+      wake_channel_unbounded::<GUID>(&dp_waker);
 
     // Writers
     let (add_writer_sender, add_writer_receiver) = wake_channel::<WriterIngredients>(10, &dp_waker);
-    let (remove_writer_sender, remove_writer_receiver) = wake_channel::<GUID>(4, &dp_waker);
+    let (remove_writer_sender, remove_writer_receiver) =
+      wake_channel_unbounded::<GUID>(&dp_waker); // unbounded: see remove readers
     let (reader_ready, reader_ready_rx) = ready_channel(&dp_waker);
     let (writer_ready, writer_ready_rx) = ready_channel(&dp_waker);
 

@@ -32,7 +32,7 @@ use crate::{
     discovery::DiscoveryCommand, discovery_db::DiscoveryDB, sedp_messages::DiscoveredWriterData,
   },
   mio_source,
-  polling::{wake_channel, BoundSender, Doorbell, ReadySender, WakeSender},
+  polling::{wake_channel, BoundSender, Doorbell, ReadySender, WakeSender, WakeUnboundedSender},
   rtps::{
     constant::DEFAULT_WRITER_MAX_SAMPLES, reader::ReaderIngredients, writer::WriterIngredients,
     writer_send_buffer::WriterSendBuffer,
@@ -104,7 +104,7 @@ impl Publisher {
     qos: QosPolicies,
     default_dw_qos: QosPolicies,
     add_writer_sender: WakeSender<WriterIngredients>,
-    remove_writer_sender: WakeSender<GUID>,
+    remove_writer_sender: WakeUnboundedSender<GUID>,
     discovery_command: WakeSender<DiscoveryCommand>,
     security_plugins_handle: Option<SecurityPluginsHandle>,
     writer_ready: ReadySender<EntityId>,
@@ -428,7 +428,7 @@ struct InnerPublisher {
   my_qos_policies: QosPolicies,
   default_datawriter_qos: QosPolicies, // used when creating a new DataWriter
   add_writer_sender: WakeSender<WriterIngredients>,
-  remove_writer_sender: WakeSender<GUID>,
+  remove_writer_sender: WakeUnboundedSender<GUID>,
   discovery_command: WakeSender<DiscoveryCommand>,
   security_plugins_handle: Option<SecurityPluginsHandle>,
   writer_ready: ReadySender<EntityId>,
@@ -443,7 +443,7 @@ impl InnerPublisher {
     qos: QosPolicies,
     default_dw_qos: QosPolicies,
     add_writer_sender: WakeSender<WriterIngredients>,
-    remove_writer_sender: WakeSender<GUID>,
+    remove_writer_sender: WakeUnboundedSender<GUID>,
     discovery_command: WakeSender<DiscoveryCommand>,
     writer_ready: ReadySender<EntityId>,
     security_plugins_handle: Option<SecurityPluginsHandle>,
@@ -762,8 +762,10 @@ impl InnerPublisher {
   pub(crate) fn remove_writer(&self, guid: GUID) {
     self
       .remove_writer_sender
-      .try_send_timeout(guid, std::time::Duration::from_millis(20))
-      .unwrap_or_else(|e| error!("Cannot remove Writer {guid:?} : {e:?}"));
+      .send(guid)
+      // Disconnected: the participant's event loop has already stopped, so
+      // there is nothing left to deregister from.
+      .unwrap_or_else(|e| debug!("Writer {guid:?} dropped after its participant stopped: {e:?}"));
   }
 
   pub(crate) fn identity(&self) -> EntityId {
@@ -825,7 +827,7 @@ impl Subscriber {
     discovery_db: Arc<RwLock<DiscoveryDB>>,
     qos: QosPolicies,
     sender_add_reader: WakeSender<ReaderIngredients>,
-    sender_remove_reader: WakeSender<GUID>,
+    sender_remove_reader: WakeUnboundedSender<GUID>,
     discovery_command: WakeSender<DiscoveryCommand>,
     security_plugins_handle: Option<SecurityPluginsHandle>,
     reader_ready: ReadySender<EntityId>,
@@ -1056,7 +1058,7 @@ pub struct InnerSubscriber {
   discovery_db: Arc<RwLock<DiscoveryDB>>,
   qos: QosPolicies,
   sender_add_reader: WakeSender<ReaderIngredients>,
-  sender_remove_reader: WakeSender<GUID>,
+  sender_remove_reader: WakeUnboundedSender<GUID>,
   discovery_command: WakeSender<DiscoveryCommand>,
   security_plugins_handle: Option<SecurityPluginsHandle>,
   reader_ready: ReadySender<EntityId>,
@@ -1070,7 +1072,7 @@ impl InnerSubscriber {
     discovery_db: Arc<RwLock<DiscoveryDB>>,
     qos: QosPolicies,
     sender_add_reader: WakeSender<ReaderIngredients>,
-    sender_remove_reader: WakeSender<GUID>,
+    sender_remove_reader: WakeUnboundedSender<GUID>,
     discovery_command: WakeSender<DiscoveryCommand>,
     security_plugins_handle: Option<SecurityPluginsHandle>,
     reader_ready: ReadySender<EntityId>,
@@ -1412,8 +1414,10 @@ impl InnerSubscriber {
   pub(crate) fn remove_reader(&self, guid: GUID) {
     self
       .sender_remove_reader
-      .try_send_timeout(guid, std::time::Duration::from_millis(20))
-      .unwrap_or_else(|e| error!("Cannot remove Reader {guid:?} : {e:?}"));
+      .send(guid)
+      // Disconnected: the participant's event loop has already stopped, so
+      // there is nothing left to deregister from.
+      .unwrap_or_else(|e| debug!("Reader {guid:?} dropped after its participant stopped: {e:?}"));
   }
 
   fn unwrap_or_new_entity_id(
