@@ -152,6 +152,8 @@ pub mod request_id;
 pub mod ros_time;
 #[cfg(feature = "dds")]
 pub mod rosout;
+/// `rosgraph_msgs/msg/Clock`, the type of `/clock` in ROS 2.
+pub mod rosgraph_msgs;
 #[cfg(feature = "dds")]
 pub mod service;
 

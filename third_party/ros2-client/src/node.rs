@@ -17,7 +17,7 @@ use rustdds::*;
 
 use crate::{
   action::*,
-  action_msgs, builtin_interfaces,
+  action_msgs, rosgraph_msgs,
   context::{Context, DEFAULT_SUBSCRIPTION_QOS},
   entities_info::{NodeEntitiesInfo, ParticipantEntitiesInfo},
   error::{CreateError, CreateResult},
@@ -166,7 +166,7 @@ impl Spinner {
 
     let ros_clock_reader = self
       .ros_context
-      .create_subscription::<builtin_interfaces::Time>(&self.clock_topic, None)?;
+      .create_subscription::<rosgraph_msgs::Clock>(&self.clock_topic, None)?;
     let ros_clock_stream = ros_clock_reader.async_stream();
     pin_mut!(ros_clock_stream);
 
@@ -206,7 +206,7 @@ impl Spinner {
 
         clock_msg = ros_clock_stream.select_next_some() => {
           match clock_msg {
-            Ok((time,_msg_info)) => {
+            Ok((rosgraph_msgs::Clock { clock: time }, _msg_info)) => {
               // Simulated time is updated internally unconditionally.
               // The logic in Node decides if it is used.
               *self.sim_time.lock().unwrap() = time.into();
@@ -713,7 +713,10 @@ impl Node {
 
     let clock_topic = self.create_topic(
       &Name::new("/", "clock").unwrap(),
-      MessageTypeName::new("builtin_interfaces", "Time"),
+      // rosgraph_msgs/Clock, as every ROS 2 /clock publisher sends it. Reading
+      // it as builtin_interfaces/Time (same CDR bytes, other type name) made
+      // Fast DDS and RustDDS refuse the match ("Inconsistent topic").
+      MessageTypeName::new("rosgraph_msgs", "Clock"),
       &DEFAULT_SUBSCRIPTION_QOS,
     )?;
 
