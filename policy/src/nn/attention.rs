@@ -139,9 +139,12 @@ dispatch! {
                 ar[j] = dot(ur, &kr[j * e..(j + 1) * e]);
                 mx = mx.max(ar[j]);
             }
-            let mut sum = 0.0;
+            // exp in its own loop so it vectorises; the sum keeps its order
             for v in ar.iter_mut() {
-                *v = (*v - mx).exp();
+                *v = super::fastmath::exp(*v - mx);
+            }
+            let mut sum = 0.0;
+            for v in ar.iter() {
                 sum += *v;
             }
             let inv = 1.0 / sum;

@@ -9,9 +9,11 @@
 //! episode continues, 0.0 = episode starts here and the hidden state is zeroed).
 //! Rows are step-major: row `t * B + b`.
 
+use super::fastmath::{sigmoid, tanh};
 use super::gemm::{gemm, rm, tr};
 use super::init::{fill, Init};
 use super::params::{ParamStore, Slot};
+use super::simd::dispatch;
 use rand::Rng;
 use serde::{Deserialize, Serialize};
 
@@ -43,9 +45,138 @@ pub struct GruCache {
     dh: Vec<f32>,
 }
 
-#[inline]
-fn sigmoid(x: f32) -> f32 {
-    1.0 / (1.0 + (-x).exp())
+/// One row of [`step_rows`]. Every slice is its own argument so the compiler knows they do
+/// not overlap (slices split inside one function do not carry that), and the lengths are
+/// pinned up front: both are needed for the loop to vectorise.
+#[inline(always)]
+#[allow(clippy::too_many_arguments)]
+fn gates_row(
+    gr: &mut [f32],
+    gz: &mut [f32],
+    gn: &mut [f32],
+    hr: &[f32],
+    hz: &[f32],
+    hn: &[f32],
+    hprev: &[f32],
+    o: &mut [f32],
+    ghn: &mut [f32],
+) {
+    let h = o.len();
+    let (gr, gz, gn) = (&mut gr[..h], &mut gz[..h], &mut gn[..h]);
+    let (hr, hz, hn, hprev, ghn) = (&hr[..h], &hz[..h], &hn[..h], &hprev[..h], &mut ghn[..h]);
+    for k in 0..h {
+        let r = sigmoid(gr[k] + hr[k]);
+        let z = sigmoid(gz[k] + hz[k]);
+        let n = tanh(gn[k] + r * hn[k]);
+        gr[k] = r;
+        gz[k] = z;
+        gn[k] = n;
+        ghn[k] = hn[k];
+        o[k] = (1.0 - z) * n + z * hprev[k];
+    }
+}
+
+/// One row of [`step_rows_backward`] (separate arguments for the same reason as
+/// [`gates_row`]).
+#[inline(always)]
+#[allow(clippy::too_many_arguments)]
+fn gates_row_backward(
+    gr: &[f32],
+    gz: &[f32],
+    gnn: &[f32],
+    gn: &[f32],
+    hp: &[f32],
+    dor: &[f32],
+    dhr: &[f32],
+    d_r: &mut [f32],
+    d_z: &mut [f32],
+    d_n: &mut [f32],
+    e_r: &mut [f32],
+    e_z: &mut [f32],
+    e_n: &mut [f32],
+    dhmr: &mut [f32],
+) {
+    let h = dhmr.len();
+    let (gr, gz, gnn, gn, hp) = (&gr[..h], &gz[..h], &gnn[..h], &gn[..h], &hp[..h]);
+    let (dor, dhr) = (&dor[..h], &dhr[..h]);
+    let (d_r, d_z, d_n) = (&mut d_r[..h], &mut d_z[..h], &mut d_n[..h]);
+    let (e_r, e_z, e_n) = (&mut e_r[..h], &mut e_z[..h], &mut e_n[..h]);
+    for k in 0..h {
+        let (r, z, n) = (gr[k], gz[k], gnn[k]);
+        let d = dor[k] + dhr[k];
+        let dn_pre = d * (1.0 - z) * (1.0 - n * n);
+        let dz_pre = d * (hp[k] - n) * z * (1.0 - z);
+        let dr_pre = dn_pre * gn[k] * r * (1.0 - r);
+        d_r[k] = dr_pre;
+        d_z[k] = dz_pre;
+        d_n[k] = dn_pre;
+        e_r[k] = dr_pre;
+        e_z[k] = dz_pre;
+        e_n[k] = dn_pre * r;
+        dhmr[k] = d * z;
+    }
+}
+
+dispatch! {
+    /// Gates and new hidden state of one step for B rows (the elementwise part), with the
+    /// branch-free `fastmath` sigmoid/tanh so the loop vectorises.
+    fn step_rows(
+        gates: &mut [f32],
+        gh: &[f32],
+        hm: &[f32],
+        out: &mut [f32],
+        ghn: &mut [f32],
+        b: usize,
+        h: usize,
+    ) {
+        for bb in 0..b {
+            let g = &mut gates[bb * 3 * h..(bb + 1) * 3 * h];
+            let ghr = &gh[bb * 3 * h..(bb + 1) * 3 * h];
+            let hprev = &hm[bb * h..(bb + 1) * h];
+            let o = &mut out[bb * h..(bb + 1) * h];
+            let gn = &mut ghn[bb * h..(bb + 1) * h];
+            let (gr, rest) = g.split_at_mut(h);
+            let (gz, gnn) = rest.split_at_mut(h);
+            let (hr, rest) = ghr.split_at(h);
+            let (hz, hn) = rest.split_at(h);
+            gates_row(gr, gz, gnn, hr, hz, hn, hprev, o, gn);
+        }
+    }
+}
+
+dispatch! {
+    /// Backward of [`step_rows`] for the B rows of one step: gate gradients (input side
+    /// `dg`, hidden side `dgg`) and the direct hidden-state gradient `dhm` = d * z.
+    fn step_rows_backward(
+        gates: &[f32],
+        ghn: &[f32],
+        hm: &[f32],
+        dout: &[f32],
+        dh: &[f32],
+        dg: &mut [f32],
+        dgg: &mut [f32],
+        dhm: &mut [f32],
+        b: usize,
+        h: usize,
+    ) {
+        for bb in 0..b {
+            let gt = &gates[bb * 3 * h..(bb + 1) * 3 * h];
+            let gn = &ghn[bb * h..(bb + 1) * h];
+            let hp = &hm[bb * h..(bb + 1) * h];
+            let dor = &dout[bb * h..(bb + 1) * h];
+            let dhr = &dh[bb * h..(bb + 1) * h];
+            let dgr = &mut dg[bb * 3 * h..(bb + 1) * 3 * h];
+            let dggr = &mut dgg[bb * 3 * h..(bb + 1) * 3 * h];
+            let dhmr = &mut dhm[bb * h..(bb + 1) * h];
+            let (gr, rest) = gt.split_at(h);
+            let (gz, gnn) = rest.split_at(h);
+            let (d_r, rest) = dgr.split_at_mut(h);
+            let (d_z, d_n) = rest.split_at_mut(h);
+            let (e_r, rest) = dggr.split_at_mut(h);
+            let (e_z, e_n) = rest.split_at_mut(h);
+            gates_row_backward(gr, gz, gnn, gn, hp, dor, dhr, d_r, d_z, d_n, e_r, e_z, e_n, dhmr);
+        }
+    }
 }
 
 fn sized(v: &mut Vec<f32>, n: usize) -> &mut [f32] {
@@ -135,24 +266,17 @@ impl Gru {
             }
             let hm_s = &hm[rows.start * h..rows.end * h];
             gemm(b, h, 3 * h, 1.0, rm(hm_s, h), tr(whh, h), 1.0, gh, 3 * h);
-            for bb in 0..b {
-                let row = s * b + bb;
-                let g = &mut gates[row * 3 * h..(row + 1) * 3 * h];
-                let ghr = &gh[bb * 3 * h..(bb + 1) * 3 * h];
-                let hprev = &hm_s[bb * h..(bb + 1) * h];
-                let o = &mut out[row * h..(row + 1) * h];
-                let gn = &mut ghn[row * h..(row + 1) * h];
-                for k in 0..h {
-                    let r = sigmoid(g[k] + ghr[k]);
-                    let z = sigmoid(g[h + k] + ghr[h + k]);
-                    let n = (g[2 * h + k] + r * ghr[2 * h + k]).tanh();
-                    g[k] = r;
-                    g[h + k] = z;
-                    g[2 * h + k] = n;
-                    gn[k] = ghr[2 * h + k];
-                    o[k] = (1.0 - z) * n + z * hprev[k];
-                }
-            }
+            let rr = rows.start * 3 * h..rows.end * 3 * h;
+            let hr = rows.start * h..rows.end * h;
+            step_rows(
+                &mut gates[rr],
+                gh,
+                hm_s,
+                &mut out[hr.clone()],
+                &mut ghn[hr],
+                b,
+                h,
+            );
         }
     }
 
@@ -180,28 +304,20 @@ impl Gru {
         let dh = sized(&mut c.dh, b * h);
         dh.iter_mut().for_each(|v| *v = 0.0);
         for s in (0..t).rev() {
-            for bb in 0..b {
-                let row = s * b + bb;
-                let gt = &c.gates[row * 3 * h..(row + 1) * 3 * h];
-                let gn = &c.ghn[row * h..(row + 1) * h];
-                let hp = &c.hm[row * h..(row + 1) * h];
-                let dg = &mut dgates[row * 3 * h..(row + 1) * 3 * h];
-                let dgg = &mut dgh[row * 3 * h..(row + 1) * 3 * h];
-                for k in 0..h {
-                    let (r, z, n) = (gt[k], gt[h + k], gt[2 * h + k]);
-                    let d = dout[row * h + k] + dh[bb * h + k];
-                    let dn_pre = d * (1.0 - z) * (1.0 - n * n);
-                    let dz_pre = d * (hp[k] - n) * z * (1.0 - z);
-                    let dr_pre = dn_pre * gn[k] * r * (1.0 - r);
-                    dg[k] = dr_pre;
-                    dg[h + k] = dz_pre;
-                    dg[2 * h + k] = dn_pre;
-                    dgg[k] = dr_pre;
-                    dgg[h + k] = dz_pre;
-                    dgg[2 * h + k] = dn_pre * r;
-                    dhm[bb * h + k] = d * z;
-                }
-            }
+            let rr = s * b * 3 * h..(s + 1) * b * 3 * h;
+            let hr = s * b * h..(s + 1) * b * h;
+            step_rows_backward(
+                &c.gates[rr.clone()],
+                &c.ghn[hr.clone()],
+                &c.hm[hr.clone()],
+                &dout[hr],
+                dh,
+                &mut dgates[rr.clone()],
+                &mut dgh[rr],
+                dhm,
+                b,
+                h,
+            );
             let dgs = &dgh[s * b * 3 * h..(s + 1) * b * 3 * h];
             gemm(b, 3 * h, h, 1.0, rm(dgs, 3 * h), rm(whh, h), 1.0, dhm, h);
             for bb in 0..b {
@@ -362,5 +478,27 @@ mod tests {
         for e in &s.entries {
             assert!(s.grad[e.slot.r()].iter().any(|v| *v != 0.0), "{}", e.name);
         }
+    }
+
+    /// The dispatched gate loops give the same bits at every SIMD level (they vectorise
+    /// only where the CPU has AVX2 / AVX-512).
+    #[test]
+    fn same_bits_at_every_simd_level() {
+        let (s, g) = make(5, 64);
+        let (t, b) = (3, 7);
+        let x = rand_vec(t * b * 5, 1);
+        let h0 = rand_vec(b * 64, 2);
+        let masks = [1.0; 21];
+        let r = rand_vec(t * b * 64, 3);
+        let runs = crate::nn::simd::tests::at_every_level(|| {
+            let mut c = GruCache::default();
+            let mut out = vec![0.0; t * b * 64];
+            g.forward(&s.data, &x, t, b, &h0, &masks, &mut c, &mut out);
+            let mut gr = vec![0.0; s.len()];
+            let mut dx = vec![0.0; t * b * 5];
+            g.backward(&s.data, &mut gr, &x, t, b, &mut c, &r, &mut dx, None);
+            (out, gr, dx)
+        });
+        assert!(runs.windows(2).all(|w| w[0] == w[1]));
     }
 }

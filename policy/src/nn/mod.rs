@@ -9,6 +9,7 @@
 pub mod adam;
 pub mod attention;
 pub mod categorical;
+pub mod fastmath;
 pub mod gemm;
 #[cfg(test)]
 pub mod gradcheck;

@@ -1,7 +1,12 @@
 //! Tanh activation (in place); backward uses the output.
 
-pub fn forward(x: &mut [f32]) {
-    x.iter_mut().for_each(|v| *v = v.tanh());
+use super::simd::dispatch;
+
+dispatch! {
+    /// In place, with the branch-free `fastmath::tanh` so the loop vectorises.
+    pub fn forward(x: &mut [f32]) {
+        x.iter_mut().for_each(|v| *v = super::fastmath::tanh(*v));
+    }
 }
 
 /// dy *= 1 - y^2, where y is the forward output.
