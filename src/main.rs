@@ -13,7 +13,6 @@ mod sim_cmd;
 mod stats;
 mod train_cmd;
 
-use anyhow::Result;
 use clap::{Parser, Subcommand};
 
 #[derive(Parser)]
@@ -49,9 +48,9 @@ enum Cmd {
     Config,
 }
 
-fn main() -> Result<()> {
+fn main() -> std::process::ExitCode {
     let cli = Cli::parse();
-    match cli.cmd {
+    let r = match cli.cmd {
         Cmd::Sim(a) => sim_cmd::run(a),
         Cmd::Fleet(a) => fleet::run(a),
         Cmd::BenchSim(a) => bench_sim::run(a),
@@ -63,6 +62,15 @@ fn main() -> Result<()> {
         Cmd::Config => {
             print!("{}", sim::ScenarioConfig::default().to_toml());
             Ok(())
+        }
+    };
+    // An expected failure is one line naming its cause (with its context chain), never a
+    // Rust backtrace: those stay in the children's logs.
+    match r {
+        Ok(()) => std::process::ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("tending: error: {e:#}");
+            std::process::ExitCode::FAILURE
         }
     }
 }

@@ -22,6 +22,15 @@ cargo build --release --locked -j 2 --workspace --bins 2>&1
 echo "== cargo test --workspace --release"
 cargo test --workspace --release --locked -j 2 2>&1
 
+# Vendored rustdds (third_party/, ADR 0005): the start-up deadlock regression tests. Run
+# from a copy outside the workspace: cargo refuses a nested package that is not a member.
+echo "== cargo test: vendored rustdds, discovery deadlock regression"
+rdds="$(mktemp -d)"
+cp -r third_party/rustdds/. "$rdds"
+CARGO_TARGET_DIR="$PWD/target/third_party" cargo test --release --locked -j 2 \
+    --manifest-path "$rdds/Cargo.toml" --lib discovery::discovery::tests::announc 2>&1
+rm -rf "$rdds"
+
 # Python: rclpy (real ROS 2 Jazzy, Fast DDS, from PyPI wheels) against the release binaries:
 # tests/interop (launch-scripts install layout + launch file, robot_node and sim_bridge
 # interop over DDS). The virtualenv lives in target/ (ignored), is created if missing and

@@ -6,8 +6,6 @@
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 
-use std::time::Duration;
-
 use robot_node::args::{self, ArgError};
 use robot_node::watchdog::{Limits, Watchdog, EXIT_WATCHDOG};
 
@@ -50,12 +48,12 @@ fn main() {
         }
     }
 
-    // RustDDS 0.15 can deadlock while creating entities (docs/bench/ros.md): exit with
-    // code 75 (EX_TEMPFAIL) when start-up or the control loop hangs, for a restart
-    let wd = Watchdog::new(Limits {
-        startup: Duration::from_secs_f64(params.startup_timeout_s),
-        stall: Duration::from_secs_f64(params.stall_timeout_s),
-    });
+    // Exit with code 75 (EX_TEMPFAIL) when start-up or the control loop hangs, so that the
+    // launcher restarts the node (the safety net under the fixed RustDDS deadlock, ADR 0005)
+    let wd = Watchdog::new(Limits::from_secs(
+        params.startup_timeout_s,
+        params.stall_timeout_s,
+    ));
     let watching = wd.spawn(|stuck| {
         eprintln!("robot_node: watchdog: {stuck}");
         std::process::exit(EXIT_WATCHDOG);

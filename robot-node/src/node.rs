@@ -670,7 +670,14 @@ fn log_outcome(h: &mut Hosted, log: &NodeLoggingHandle, r: &TickResult, what: &s
 /// Wall clock or sim time: one control step of `h` now, and its command.
 fn tick_now(h: &mut Hosted, log: &NodeLoggingHandle, now: f64) {
     let r = h.brain.tick(now);
-    h.publish(r.velocity, None);
+    // A command computed from state carries the stamp of the robot's own pose it used (as
+    // in lockstep), so the bridge can tell robots that receive its state from robots that
+    // only send zeros (`robots_on_state`, the fleet's health check); none otherwise.
+    let stamp = match r.outcome {
+        Outcome::Command => h.brain.world.own_pose_stamp(),
+        _ => None,
+    };
+    h.publish(r.velocity, stamp);
     log_outcome(h, log, &r, "controlling");
 }
 

@@ -45,6 +45,10 @@ pub struct BridgeCounters {
     pub commands_failed: u64,
 }
 
+/// How old (sim seconds) the state a robot's latest command answers may be for the robot
+/// to count in [`MetricsLine::robots_on_state`]: 10 steps at the paper's dt.
+pub const ON_STATE_WINDOW_S: f64 = 1.0;
+
 /// One metrics line (JSON on stdout, and `/tending/metrics`).
 #[derive(Debug, Clone, Serialize, PartialEq)]
 pub struct MetricsLine {
@@ -58,6 +62,9 @@ pub struct MetricsLine {
     pub collisions: u32,
     pub p_max: u32,
     pub mu: f64,
+    /// Robots whose latest command answers a state at most [`ON_STATE_WINDOW_S`] old: they
+    /// receive this bridge's state and act on it (`tending fleet` checks it).
+    pub robots_on_state: usize,
     #[serde(flatten)]
     pub counters: BridgeCounters,
     #[serde(skip_serializing_if = "std::ops::Not::not")]
@@ -390,9 +397,21 @@ impl Core {
             collisions: m.collisions,
             p_max: m.p_max,
             mu: m.utilization(),
+            robots_on_state: self.robots_on_state(),
             counters: self.counters.clone(),
             done: self.done(),
         }
+    }
+
+    /// Robots whose latest command carries the stamp of a state at most
+    /// [`ON_STATE_WINDOW_S`] of sim time older than the current one (robot_node stamps a
+    /// command with its own pose's stamp when it computed it from state, none otherwise).
+    pub fn robots_on_state(&self) -> usize {
+        let oldest = self.stamp_key() - (ON_STATE_WINDOW_S * 1e6) as i64;
+        self.robots
+            .values()
+            .filter(|s| s.cmd_stamp.is_some_and(|k| k >= oldest))
+            .count()
     }
 
     /// Robots by name: position and has_part.
@@ -612,6 +631,30 @@ mod tests {
         );
         assert!(!c.lockstep_status(0.4).0);
         assert_eq!(c.stamp_key(), 100_000);
+    }
+
+    #[test]
+    fn robots_on_state_counts_commands_answering_recent_state_only() {
+        let mut c = core(Mode::Realtime);
+        assert_eq!(c.metrics().robots_on_state, 0);
+        let k0 = c.stamp_key();
+        // robot_0 acts on state, robot_1 only sends unstamped zeros (never got its pose)
+        c.on_cmd("robot_0", &Twist::planar(0.5, 0.0), Some(k0), 0.0);
+        c.on_cmd("robot_1", &Twist::planar(0.0, 0.0), None, 0.0);
+        assert_eq!(c.metrics().robots_on_state, 1);
+        // 20 steps (2 s of sim time) later robot_0's answer is too old
+        for i in 0..20 {
+            c.on_cmd("robot_1", &Twist::planar(0.0, 0.0), None, 0.1 * i as f64);
+            c.step(0.1 * i as f64, false).unwrap();
+        }
+        assert_eq!(c.metrics().robots_on_state, 0);
+        c.on_cmd(
+            "robot_0",
+            &Twist::planar(0.5, 0.0),
+            Some(c.stamp_key()),
+            2.0,
+        );
+        assert_eq!(c.metrics().robots_on_state, 1);
     }
 
     #[test]

@@ -5,7 +5,8 @@
 //!   command, despawn when stale, lockstep bookkeeping, `/tending/command`, metrics,
 //!   markers;
 //! - [`delay`]: the fault-injection hold of `test_cmd_delay_ms` / `test_state_delay_ms`;
-//! - [`node`]: the ros2-client node (per-entity publishers, cmd_vel discovery, step loop).
+//! - [`node`]: the ros2-client node (per-entity publishers, cmd_vel discovery, step loop);
+//! - [`watchdog`]: the stages the start-up/stall watchdog names (exit code 75).
 //!
 //! Run-time commands on `/tending/command` (std_msgs/String): `add_machine [x y]`,
 //! `remove_machine <id>`, `add_storage [x y]`, `remove_storage <id>`,
@@ -18,3 +19,4 @@ pub mod core;
 pub mod delay;
 pub mod node;
 pub mod params;
+pub mod watchdog;

@@ -6,6 +6,7 @@ use std::sync::Arc;
 
 use msgs::rosargs::ArgError;
 use sim_bridge::params;
+use sim_bridge::watchdog::{Limits, Watchdog, EXIT_WATCHDOG};
 
 fn main() {
     let env_domain = std::env::var("ROS_DOMAIN_ID").ok();
@@ -40,7 +41,18 @@ fn main() {
             std::process::exit(1);
         }
     }
-    if let Err(e) = sim_bridge::node::run(p, &stop) {
+    // Exit with code 75 (EX_TEMPFAIL) when start-up or the step loop hangs, so that
+    // `tending fleet` restarts the bridge instead of running a dead fleet.
+    let wd = Watchdog::new(Limits::from_secs(p.startup_timeout_s, p.stall_timeout_s));
+    let watching = wd.spawn(|stuck| {
+        eprintln!("sim_bridge: watchdog: {stuck}");
+        std::process::exit(EXIT_WATCHDOG);
+    });
+    if let Err(e) = watching {
+        eprintln!("sim_bridge: error: cannot start the watchdog thread: {e}");
+        std::process::exit(1);
+    }
+    if let Err(e) = sim_bridge::node::run_watched(p, &stop, &wd) {
         tracing::error!("{e:#}");
         std::process::exit(1);
     }

@@ -20,6 +20,7 @@ use msgs::{
 use crate::core::{Core, MetricsLine};
 use crate::delay::DelayQueue;
 use crate::params::{BridgeParams, Mode};
+use crate::watchdog::{Stage, Watchdog};
 
 fn dds_err<E: std::fmt::Debug>(what: &str) -> impl FnOnce(E) -> anyhow::Error + '_ {
     move |e| anyhow!("{what}: {e:?}")
@@ -122,11 +123,24 @@ fn stdin_lines() -> std::sync::mpsc::Receiver<String> {
 
 /// Run until `stop` is set or `max_steps` is reached; returns the last metrics.
 pub fn run(p: BridgeParams, stop: &AtomicBool) -> anyhow::Result<MetricsLine> {
+    run_watched(p, stop, &Watchdog::disabled())
+}
+
+/// [`run`], recording each start-up stage and every step-loop iteration in `wd` (whose
+/// thread, started by the caller, ends a hung process).
+pub fn run_watched(
+    p: BridgeParams,
+    stop: &AtomicBool,
+    wd: &Watchdog,
+) -> anyhow::Result<MetricsLine> {
     let t0 = Instant::now();
     let now_s = || t0.elapsed().as_secs_f64();
+    wd.stage(Stage::Core);
     let mut core = Core::new(p.clone(), 0.0)?;
+    wd.stage(Stage::Context);
     let ctx = Context::with_options(ContextOptions::new().domain_id(p.domain_id))
         .map_err(dds_err("DDS context"))?;
+    wd.stage(Stage::Node);
     let mut node = ctx
         .new_node(
             NodeName::new(&p.namespace, &p.node_name).map_err(dds_err("node name"))?,
@@ -141,7 +155,8 @@ pub fn run(p: BridgeParams, stop: &AtomicBool) -> anyhow::Result<MetricsLine> {
                 warn!("spinner stopped with error: {e:?}");
             }
         })?;
-    let r = event_loop(&p, stop, &ctx, &mut node, &mut core, &now_s);
+    let r = event_loop(&p, stop, &ctx, &mut node, &mut core, &now_s, wd);
+    wd.stage(Stage::Done);
     drop(node);
     let _ = spin_thread.join();
     r
@@ -154,7 +169,9 @@ fn event_loop(
     node: &mut Node,
     core: &mut Core,
     now_s: &dyn Fn() -> f64,
+    wd: &Watchdog,
 ) -> anyhow::Result<MetricsLine> {
+    wd.stage(Stage::Endpoints);
     let clock_pub: Publisher<Clock> = publisher(node, topics::CLOCK, Profile::Clock)?;
     let markers_pub: Publisher<MarkerArray> =
         publisher(node, topics::MARKERS, Profile::Visualization)?;
@@ -203,6 +220,7 @@ fn event_loop(
         if subs.iter().any(|(n, _)| n == name) {
             return Ok(());
         }
+        wd.beat(); // start-up progress: one reader per robot
         let mut s: Subscription<Twist> = subscription(
             node,
             &robot(name, Leaf::CmdVel).ros_name(),
@@ -236,6 +254,7 @@ fn event_loop(
         robots_w.retain(|n, _| states.iter().any(|s| &s.0 == n));
         for (name, _, _) in &states {
             if !robots_w.contains_key(name) {
+                wd.beat(); // progress while creating many writers (100 robots at start-up)
                 let w = EntityWriters {
                     pose: StampedWriter::new(
                         ctx,
@@ -262,6 +281,7 @@ fn event_loop(
         for m in &ms {
             let j = m.id.0;
             if !machines_w.contains_key(&j) {
+                wd.beat();
                 let w = EntityWriters {
                     pose: StampedWriter::new(
                         ctx,
@@ -288,6 +308,7 @@ fn event_loop(
         for s in &ss {
             let k = s.id.0;
             if !storages_w.contains_key(&k) {
+                wd.beat();
                 let w = EntityWriters {
                     pose: StampedWriter::new(
                         ctx,
@@ -440,7 +461,9 @@ fn event_loop(
         p.mode == Mode::Realtime,
     )?;
 
+    wd.stage(Stage::Running);
     while !stop.load(Ordering::SeqCst) {
+        wd.beat();
         let now = Instant::now();
         let mut deadline = next_discovery
             .min(next_metrics)
@@ -517,10 +540,12 @@ fn event_loop(
                 }
                 if let Entity::Robot(name) = &topic.entity {
                     if !cmd_subs.iter().any(|(n, _)| n == name) {
+                        wd.stage(Stage::EntityEndpoints);
                         match subscribe_cmd(node, &poll, &mut cmd_subs, name) {
                             Ok(()) => info!("discovered /{name}/cmd_vel"),
                             Err(e) => warn!("cannot subscribe to /{name}/cmd_vel: {e:#}"),
                         }
+                        wd.stage(Stage::Running);
                     }
                 }
             }

@@ -14,7 +14,9 @@ parameters: setup (6.4_2), seed (0), mode (realtime|lockstep), rate_hz (10), sta
             discovery_period_s (0.5), record (bag directory: record every published topic and every
             received cmd_vel as a rosbag2 MCAP bag; default: none), stdin_commands (false: also read
             /tending/command lines from stdin), test_cmd_delay_ms (0: fault injection, hold every
-            received cmd_vel this long before the simulator sees it)
+            received cmd_vel this long before the simulator sees it), startup_timeout_s (10),
+            stall_timeout_s (10): watchdog, exit code 75 when start-up or the step loop makes no
+            progress that long (0 disables)
 topics: /clock, /<robot>/pose, /<robot>/has_part, /machine_<j>/pose, /machine_<j>/part_ready,
         /storage_<k>/pose, /tending/markers, /tending/metrics; subscribes /<robot>/cmd_vel (discovered)
         and /tending/command (std_msgs/String: add_machine [x y] | remove_machine ID | add_storage [x y] |
@@ -66,6 +68,10 @@ pub struct BridgeParams {
     /// publishes (poses, has_part, part_ready, markers, metrics, /clock) goes out this many
     /// milliseconds after the step that produced it; the step loop does not wait.
     pub test_state_delay_ms: f64,
+    /// Watchdog: exit with code 75 when start-up makes no progress this long (0: off).
+    pub startup_timeout_s: f64,
+    /// Watchdog: exit with code 75 when the step loop stalls this long (0: off).
+    pub stall_timeout_s: f64,
 }
 
 impl Default for BridgeParams {
@@ -93,6 +99,8 @@ impl Default for BridgeParams {
             stdin_commands: false,
             test_cmd_delay_ms: 0.0,
             test_state_delay_ms: 0.0,
+            startup_timeout_s: 10.0,
+            stall_timeout_s: 10.0,
         }
     }
 }
@@ -170,6 +178,20 @@ where
                     return Err(bad(n, format!("must be finite and >= 0, got {x}")));
                 }
                 p.startup_grace_s = x;
+            }
+            "startup_timeout_s" | "stall_timeout_s" => {
+                let x = num(n, &v)?;
+                if !(x.is_finite() && x >= 0.0) {
+                    return Err(bad(
+                        n,
+                        format!("must be a finite number of seconds >= 0 (0 disables), got {x}"),
+                    ));
+                }
+                if n == "startup_timeout_s" {
+                    p.startup_timeout_s = x;
+                } else {
+                    p.stall_timeout_s = x;
+                }
             }
             "settle_s" => {
                 let x = num(n, &v)?;
@@ -273,8 +295,29 @@ mod tests {
             "test_state_delay_ms:=-1",
             "test_state_delay_ms:=20000",
             "test_cmd_delay_ms:=nan",
+            "startup_timeout_s:=-1",
+            "stall_timeout_s:=soon",
+            "stall_timeout_s:=.inf",
         ] {
             assert!(parse(["--ros-args", "-p", bad], None).is_err(), "{bad}");
         }
+    }
+
+    #[test]
+    fn watchdog_timeouts() {
+        let (p, _) = parse(Vec::<String>::new(), None).unwrap();
+        assert_eq!((p.startup_timeout_s, p.stall_timeout_s), (10.0, 10.0));
+        let (p, _) = parse(
+            [
+                "--ros-args",
+                "-p",
+                "startup_timeout_s:=2.5",
+                "-p",
+                "stall_timeout_s:=0",
+            ],
+            None,
+        )
+        .unwrap();
+        assert_eq!((p.startup_timeout_s, p.stall_timeout_s), (2.5, 0.0));
     }
 }

@@ -1,32 +1,45 @@
-//! `tending fleet`: one `sim_bridge` and one `robot_node` process per robot, live metrics,
-//! clean shutdown (SIGINT to every child, wait, then kill), non-zero exit if a child fails.
+//! `tending fleet`: one `sim_bridge` and `robot_node` processes (one per robot, or groups
+//! of robots for large fleets, [`layout`]), live metrics and health, clean shutdown
+//! (SIGINT to every child, wait, then kill), non-zero exit when the run failed.
 //!
-//! While it runs, the fleet takes commands on stdin, one per line (docs/bench/live.md):
-//! `add robot [NAME]` starts one more robot_node (the bridge spawns its body on its first
-//! cmd_vel), `kill NAME` SIGKILLs a robot_node (the bridge drops the body when its cmd_vel
-//! goes stale), `stop NAME` SIGINTs it, `add machine [X Y]`, `remove machine ID`,
-//! `add storage [X Y]`, `remove storage ID` go to the bridge (its `/tending/command`
-//! language, through its stdin), `status` prints the processes and the last metrics.
-//! `--record DIR` makes the bridge record a rosbag2 MCAP bag of everything it publishes and
-//! receives.
+//! While it runs, the fleet takes commands on stdin, one per line ([`live`],
+//! docs/bench/live.md): `add robot [NAME]` starts one more robot_node (the bridge spawns
+//! its body on its first cmd_vel), `kill NAME` SIGKILLs a robot (the bridge drops the body
+//! when its cmd_vel goes stale), `stop NAME` SIGINTs it, `add machine [X Y]`,
+//! `remove machine ID`, `add storage [X Y]`, `remove storage ID` go to the bridge (its
+//! `/tending/command` language, through its stdin), `status` prints the processes, the
+//! health and the last metrics. A robot hosted in a group process is killed or stopped by
+//! restarting its group without it. `--record DIR` makes the bridge record a rosbag2 MCAP
+//! bag of everything it publishes and receives.
 //!
-//! A robot_node that exits with code 75 (`EX_TEMPFAIL`: its watchdog ended a start-up or
-//! control loop hung in the RustDDS entity-creation deadlock, docs/bench/ros.md) is
-//! restarted with the same arguments, at most [`MAX_RESTARTS`] times per robot; `status`
-//! and the end of the run report the restarts. Any other early exit is a failure.
+//! A child that exits with code 75 (`EX_TEMPFAIL`: its watchdog ended a hung start-up or
+//! loop) is restarted with the same arguments, at most [`MAX_RESTARTS`] times per process;
+//! any other early exit is a failure. The run also fails, with a one-line reason, when it
+//! is unhealthy ([`health`]: robots not acting on the bridge's state, the bridge not
+//! stepping at its rate, nothing delivered).
 
-use std::io::{BufRead, BufReader};
+mod health;
+mod layout;
+mod live;
+
+use std::collections::BTreeMap;
+use std::io::{BufRead, BufReader, Write};
+use std::os::unix::process::CommandExt;
 use std::path::{Path, PathBuf};
-use std::process::{Child, Command, Stdio};
+use std::process::{Child, ChildStdin, Command, Stdio};
 use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::mpsc::{Receiver, RecvTimeoutError, Sender};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 use anyhow::{anyhow, bail, Context, Result};
 
+use health::{Health, Sample};
+use live::{parse_live, LiveCmd};
+
 #[derive(clap::Args, Debug)]
 pub struct FleetArgs {
-    /// Setup N.M_K (N robot_node processes).
+    /// Setup N.M_K (N robots).
     #[arg(long, default_value = "6.4_2")]
     pub setup: String,
     /// Run time in seconds: wall time in realtime mode, sim time in lockstep mode.
@@ -60,12 +73,44 @@ pub struct FleetArgs {
     /// every robot_node's inputs.
     #[arg(long, default_value_t = 2.0)]
     pub stale_timeout: f64,
+    /// Robots hosted per robot_node process (each keeps its own controller and cmd_vel).
+    /// Default: one per robot up to 10 processes per core, larger fleets split into that
+    /// many processes (20 on 2 cores: 100 robots run as 20 processes of 5).
+    #[arg(long)]
+    pub robots_per_process: Option<usize>,
     /// Extra `-p NAME:=VALUE` for every robot_node (repeatable; e.g. test_delay_ms:=50).
     #[arg(long = "robot-param")]
     pub robot_params: Vec<String>,
     /// Do not read commands from stdin.
     #[arg(long)]
     pub no_stdin: bool,
+}
+
+/// A child's exit code when its watchdog ended it (`ros::watchdog::EXIT_WATCHDOG`).
+const EXIT_WATCHDOG: i32 = 75;
+/// Watchdog restarts allowed per process.
+const MAX_RESTARTS: u32 = 3;
+/// A robot process (or the bridge) is given this long to start before its robots count in
+/// the health check.
+const STARTUP_GRACE: Duration = Duration::from_secs(15);
+/// How long a stopped child may take to exit before it is killed.
+const STOP_GRACE: Duration = Duration::from_secs(5);
+const BRIDGE: &str = "sim_bridge";
+
+/// Restart a process that exited with `code` after `restarts` restarts already?
+fn should_restart(code: Option<i32>, restarts: u32) -> bool {
+    code == Some(EXIT_WATCHDOG) && restarts < MAX_RESTARTS
+}
+
+/// `robot_3 x1, robot_7 x2`, or `none`.
+fn restarts_summary(r: &BTreeMap<String, u32>) -> String {
+    if r.is_empty() {
+        return "none".into();
+    }
+    r.iter()
+        .map(|(n, k)| format!("{n} x{k}"))
+        .collect::<Vec<_>>()
+        .join(", ")
 }
 
 fn sibling(name: &str) -> Result<PathBuf> {
@@ -79,7 +124,7 @@ fn sibling(name: &str) -> Result<PathBuf> {
             "{} not found next to {} (build it: cargo build --release -p {})",
             p.display(),
             exe.display(),
-            if name == "sim_bridge" {
+            if name == BRIDGE {
                 "sim-bridge"
             } else {
                 "robot-node"
@@ -87,137 +132,6 @@ fn sibling(name: &str) -> Result<PathBuf> {
         );
     }
     Ok(p)
-}
-
-/// robot_node's exit code when its watchdog ended it (robot_node::watchdog::EXIT_WATCHDOG).
-const EXIT_WATCHDOG: i32 = 75;
-/// Watchdog restarts allowed per robot.
-const MAX_RESTARTS: u32 = 3;
-
-/// Restart a robot_node that exited with `code` after `restarts` restarts already?
-fn should_restart(code: Option<i32>, restarts: u32) -> bool {
-    code == Some(EXIT_WATCHDOG) && restarts < MAX_RESTARTS
-}
-
-/// `robot_3 x1, robot_7 x2`, or `none`.
-fn restarts_summary(r: &std::collections::BTreeMap<String, u32>) -> String {
-    if r.is_empty() {
-        return "none".into();
-    }
-    r.iter()
-        .map(|(n, k)| format!("{n} x{k}"))
-        .collect::<Vec<_>>()
-        .join(", ")
-}
-
-struct Proc {
-    name: String,
-    child: Child,
-}
-
-/// A command typed while the fleet runs (see the module docs).
-#[derive(Debug, PartialEq)]
-enum LiveCmd {
-    AddRobot(Option<String>),
-    Kill(String),
-    Stop(String),
-    /// A line for the bridge's `/tending/command` language.
-    Bridge(String),
-    Status,
-}
-
-fn parse_live(line: &str) -> Result<LiveCmd, String> {
-    let w: Vec<&str> = line.split_whitespace().collect();
-    let num = |s: &str| -> Result<(), String> {
-        s.parse::<f64>()
-            .ok()
-            .filter(|x| x.is_finite())
-            .map(|_| ())
-            .ok_or_else(|| format!("bad number `{s}`"))
-    };
-    let pos = |rest: &[&str]| -> Result<String, String> {
-        match rest {
-            [] => Ok(String::new()),
-            [x, y] => {
-                num(x)?;
-                num(y)?;
-                Ok(format!(" {x} {y}"))
-            }
-            _ => Err("expected no position or `X Y`".into()),
-        }
-    };
-    let robot_name = |n: &str| -> Result<String, String> {
-        let n = n.trim_start_matches('/');
-        if !n.is_empty()
-            && !n.as_bytes()[0].is_ascii_digit()
-            && n.bytes().all(|b| b.is_ascii_alphanumeric() || b == b'_')
-            && !n.starts_with("machine_")
-            && !n.starts_with("storage_")
-        {
-            Ok(n.to_string())
-        } else {
-            Err(format!("bad robot name `{n}`"))
-        }
-    };
-    match w.as_slice() {
-        ["add", "robot"] => Ok(LiveCmd::AddRobot(None)),
-        ["add", "robot", n] => Ok(LiveCmd::AddRobot(Some(robot_name(n)?))),
-        ["kill", n] | ["remove", "robot", n] => Ok(LiveCmd::Kill(robot_name(n)?)),
-        ["stop", n] => Ok(LiveCmd::Stop(robot_name(n)?)),
-        ["add", "machine", rest @ ..] => Ok(LiveCmd::Bridge(format!("add_machine{}", pos(rest)?))),
-        ["add", "storage", rest @ ..] => Ok(LiveCmd::Bridge(format!("add_storage{}", pos(rest)?))),
-        ["remove", "machine", id] => id
-            .parse::<u32>()
-            .map(|i| LiveCmd::Bridge(format!("remove_machine {i}")))
-            .map_err(|_| format!("bad id `{id}`")),
-        ["remove", "storage", id] => id
-            .parse::<u32>()
-            .map(|i| LiveCmd::Bridge(format!("remove_storage {i}")))
-            .map_err(|_| format!("bad id `{id}`")),
-        ["status"] => Ok(LiveCmd::Status),
-        _ => Err(format!(
-            "unknown command `{line}` (add robot [NAME] | kill NAME | stop NAME | add machine [X Y] | remove machine ID | add storage [X Y] | remove storage ID | status)"
-        )),
-    }
-}
-
-fn signal(pid: u32, sig: i32) {
-    // SAFETY: plain kill(2) on a child we spawned and have not reaped yet.
-    unsafe {
-        libc::kill(pid as i32, sig);
-    }
-}
-
-/// SIGINT every child still running, wait up to `grace`, then SIGKILL. Returns the
-/// children that exited unsuccessfully (after having been asked to stop, or before).
-fn shutdown(procs: &mut [Proc], grace: Duration) -> Vec<String> {
-    for p in procs.iter_mut() {
-        if let Ok(None) = p.child.try_wait() {
-            signal(p.child.id(), libc::SIGINT);
-        }
-    }
-    let until = Instant::now() + grace;
-    let mut failed = Vec::new();
-    for p in procs.iter_mut() {
-        let status = loop {
-            match p.child.try_wait() {
-                Ok(Some(s)) => break Some(s),
-                Ok(None) if Instant::now() < until => std::thread::sleep(Duration::from_millis(20)),
-                _ => {
-                    let _ = p.child.kill();
-                    let _ = p.child.wait();
-                    failed.push(format!("{} (killed after {grace:?})", p.name));
-                    break None;
-                }
-            }
-        };
-        if let Some(s) = status {
-            if !s.success() {
-                failed.push(format!("{} ({s})", p.name));
-            }
-        }
-    }
-    failed
 }
 
 /// The checkpoint shipped in the repository (the README's main job runs it).
@@ -243,387 +157,627 @@ fn resolve_policy(p: Option<PathBuf>) -> Option<PathBuf> {
     }
 }
 
-pub fn run(mut a: FleetArgs) -> Result<()> {
-    a.policy = resolve_policy(a.policy.take());
-    let setup: sim::Setup = a.setup.parse().map_err(|e| anyhow!("--setup: {e}"))?;
-    if !(a.duration.is_finite() && a.duration > 0.0) {
-        bail!("--duration must be > 0");
+fn signal(pid: u32, sig: i32) {
+    // SAFETY: plain kill(2) on a child we spawned and have not reaped yet.
+    unsafe {
+        libc::kill(pid as i32, sig);
     }
-    let bridge_bin = sibling("sim_bridge")?;
-    let node_bin = sibling("robot_node")?;
-    if let Some(p) = &a.policy {
-        // fail early with the checkpoint's own error rather than N identical child errors
-        policy_check(p)?;
-    }
-    let cfg = match &a.config {
-        Some(p) => sim::ScenarioConfig::load(p).map_err(|e| anyhow!("{}: {e}", p.display()))?,
-        None => sim::ScenarioConfig::default(),
-    };
-    let env = sim::Env::new(cfg.clone(), setup, a.seed)?;
-    let sizes = *env.sizes();
-    let domain = a.domain.unwrap_or_else(|| {
-        std::env::var("ROS_DOMAIN_ID")
-            .ok()
-            .and_then(|d| d.trim().parse().ok())
-            .unwrap_or(0)
-    });
-    let lockstep = a.mode == "lockstep";
-    let log_dir = a.log_dir.clone().unwrap_or_else(|| {
-        std::env::temp_dir().join(format!("tending-fleet-{}", std::process::id()))
-    });
-    std::fs::create_dir_all(&log_dir)
-        .with_context(|| format!("creating log directory {}", log_dir.display()))?;
-    let log = |name: &str| -> Result<std::fs::File> {
-        let p = log_dir.join(format!("{name}.log"));
-        std::fs::File::create(&p).with_context(|| format!("creating {}", p.display()))
-    };
-    // a restarted robot_node appends to its log (the watchdog's message stays)
-    let log_append = |name: &str| -> Result<std::fs::File> {
-        let p = log_dir.join(format!("{name}.log"));
-        std::fs::OpenOptions::new()
-            .create(true)
-            .append(true)
-            .open(&p)
-            .with_context(|| format!("opening {}", p.display()))
-    };
+}
 
+/// Wait up to `grace` for `child` to exit, then SIGKILL it. None if it had to be killed.
+fn wait_or_kill(child: &mut Child, grace: Duration) -> Option<std::process::ExitStatus> {
+    let until = Instant::now() + grace;
+    loop {
+        match child.try_wait() {
+            Ok(Some(s)) => return Some(s),
+            Ok(None) if Instant::now() < until => std::thread::sleep(Duration::from_millis(20)),
+            _ => {
+                let _ = child.kill();
+                let _ = child.wait();
+                return None;
+            }
+        }
+    }
+}
+
+/// One robot_node process and the robots it hosts.
+struct RobotProc {
+    robots: Vec<String>,
+    label: String,
+    child: Child,
+    started: Instant,
+}
+
+struct BridgeProc {
+    child: Child,
+    stdin: ChildStdin,
+    started: Instant,
+}
+
+/// Everything fixed for the run: what to start and how.
+struct Plan {
+    a: FleetArgs,
+    setup: sim::Setup,
+    cfg: sim::ScenarioConfig,
+    sizes: sim::Sizes,
+    domain: u16,
+    lockstep: bool,
+    log_dir: PathBuf,
+    node_bin: PathBuf,
+    bridge_bin: PathBuf,
+    per_process: usize,
+}
+
+impl Plan {
+    fn new(mut a: FleetArgs) -> Result<Plan> {
+        a.policy = resolve_policy(a.policy.take());
+        let setup: sim::Setup = a.setup.parse().map_err(|e| anyhow!("--setup: {e}"))?;
+        if !(a.duration.is_finite() && a.duration > 0.0) {
+            bail!("--duration must be > 0");
+        }
+        let bridge_bin = sibling(BRIDGE)?;
+        let node_bin = sibling("robot_node")?;
+        if let Some(p) = &a.policy {
+            // fail early with one clear error rather than N identical child errors
+            if !p.is_file() {
+                bail!("policy checkpoint {} does not exist", p.display());
+            }
+        }
+        let cfg = match &a.config {
+            Some(p) => sim::ScenarioConfig::load(p).map_err(|e| anyhow!("{}: {e}", p.display()))?,
+            None => sim::ScenarioConfig::default(),
+        };
+        let sizes = *sim::Env::new(cfg.clone(), setup, a.seed)?.sizes();
+        let domain = a.domain.unwrap_or_else(|| {
+            std::env::var("ROS_DOMAIN_ID")
+                .ok()
+                .and_then(|d| d.trim().parse().ok())
+                .unwrap_or(0)
+        });
+        let log_dir = a.log_dir.clone().unwrap_or_else(|| {
+            std::env::temp_dir().join(format!("tending-fleet-{}", std::process::id()))
+        });
+        std::fs::create_dir_all(&log_dir)
+            .with_context(|| format!("creating log directory {}", log_dir.display()))?;
+        let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
+        let per_process = layout::robots_per_process(setup.robots, cores, a.robots_per_process);
+        Ok(Plan {
+            lockstep: a.mode == "lockstep",
+            a,
+            setup,
+            cfg,
+            sizes,
+            domain,
+            log_dir,
+            node_bin,
+            bridge_bin,
+            per_process,
+        })
+    }
+
+    /// A child's log file; a restarted child appends (its watchdog's message stays).
+    fn log(&self, label: &str, append: bool) -> Result<std::fs::File> {
+        let p = self.log_dir.join(format!("{label}.log"));
+        let mut o = std::fs::OpenOptions::new();
+        if append {
+            o.create(true).append(true);
+        } else {
+            o.create(true).write(true).truncate(true);
+        }
+        o.open(&p)
+            .with_context(|| format!("opening {}", p.display()))
+    }
+
+    fn spawn_robots(&self, robots: &[String], restart: bool) -> Result<RobotProc> {
+        let f = |x: f32| format!("{:?}", x as f64);
+        let label = layout::label(robots);
+        let mut c = Command::new(&self.node_bin);
+        c.env("ROS_DOMAIN_ID", self.domain.to_string());
+        match robots {
+            [one] => c.args(["--ros-args", "-r", &format!("__ns:=/{one}")]),
+            many => c.args(["--ros-args", "-p", &format!("robots:={}", many.join(","))]),
+        };
+        let s = &self.sizes;
+        c.args(["-p", &format!("control_rate_hz:={}", self.a.rate_hz)])
+            .args(["-p", &format!("k_speed:={}", f(self.cfg.task.k_speed))])
+            .args(["-p", &format!("robot_radius:={}", f(s.robot_radius))])
+            .args(["-p", &format!("machine_half_x:={}", f(s.machine_half[0]))])
+            .args(["-p", &format!("machine_half_y:={}", f(s.machine_half[1]))])
+            .args(["-p", &format!("storage_half_x:={}", f(s.storage_half[0]))])
+            .args(["-p", &format!("storage_half_y:={}", f(s.storage_half[1]))])
+            .args([
+                "-p",
+                &format!("stale_timeout_s:={:?}", self.a.stale_timeout),
+            ])
+            .stdin(Stdio::null())
+            .stdout(Stdio::null())
+            .stderr(self.log(&label, restart)?)
+            .process_group(0); // Ctrl-C reaches us only; we stop the children in order
+        if self.lockstep {
+            c.args(["-p", "lockstep:=true"]);
+        }
+        if let Some(p) = &self.a.policy {
+            c.args(["-p", &format!("policy:={}", p.display())]);
+        }
+        for rp in &self.a.robot_params {
+            c.args(["-p", rp]);
+        }
+        let child = c
+            .spawn()
+            .with_context(|| format!("starting {}", self.node_bin.display()))?;
+        Ok(RobotProc {
+            robots: robots.to_vec(),
+            label,
+            child,
+            started: Instant::now(),
+        })
+    }
+
+    /// Start the bridge; its stdout (metrics lines) goes to `metrics`.
+    fn spawn_bridge(&self, restart: bool, metrics: Sender<String>) -> Result<BridgeProc> {
+        let a = &self.a;
+        let mut b = Command::new(&self.bridge_bin);
+        b.env("ROS_DOMAIN_ID", self.domain.to_string())
+            .args(["--ros-args", "-p", &format!("setup:={}", self.setup)])
+            .args(["-p", &format!("seed:={}", a.seed)])
+            .args(["-p", &format!("mode:={}", a.mode)])
+            .args(["-p", &format!("rate_hz:={}", a.rate_hz)])
+            .args(["-p", &format!("stale_timeout_s:={:?}", a.stale_timeout)])
+            .args(["-p", "stdin_commands:=true"])
+            .stdin(Stdio::piped())
+            .stdout(Stdio::piped())
+            .stderr(self.log(BRIDGE, restart)?)
+            .process_group(0);
+        if let Some(c) = &a.config {
+            b.args(["-p", &format!("config:={}", c.display())]);
+        }
+        if let Some(r) = &a.record {
+            b.args(["-p", &format!("record:={}", r.display())]);
+        }
+        if self.lockstep {
+            let steps = (a.duration * a.rate_hz).round().max(1.0) as u64;
+            b.args(["-p", &format!("max_steps:={steps}")]);
+        }
+        let mut child = b
+            .spawn()
+            .with_context(|| format!("starting {}", self.bridge_bin.display()))?;
+        let out = child.stdout.take().expect("piped");
+        let stdin = child.stdin.take().expect("piped");
+        std::thread::spawn(move || {
+            for line in BufReader::new(out).lines().map_while(Result::ok) {
+                if metrics.send(line).is_err() {
+                    break;
+                }
+            }
+        });
+        Ok(BridgeProc {
+            child,
+            stdin,
+            started: Instant::now(),
+        })
+    }
+}
+
+/// A running fleet: its processes and what it has seen.
+struct Fleet {
+    plan: Plan,
+    robots: Vec<RobotProc>,
+    bridge: BridgeProc,
+    metrics_tx: Sender<String>,
+    metrics_rx: Receiver<String>,
+    commands: Receiver<String>,
+    t0: Instant,
+    wall_limit: Duration,
+    last: Option<serde_json::Value>,
+    health: Health,
+    /// Watchdog restarts by process label (`sim_bridge` for the bridge).
+    restarts: BTreeMap<String, u32>,
+    next_robot: usize,
+    /// Why the run ended early, if it did.
+    failure: Option<String>,
+    /// The bridge ended by itself (lockstep `max_steps`).
+    bridge_finished: bool,
+}
+
+pub fn run(a: FleetArgs) -> Result<()> {
     let stop = Arc::new(AtomicBool::new(false));
     {
         let stop = stop.clone();
         ctrlc::set_handler(move || stop.store(true, Ordering::SeqCst))
             .context("installing the Ctrl-C handler")?;
     }
-
-    use std::os::unix::process::CommandExt;
-    let mut procs: Vec<Proc> = Vec::new();
-    let f = |x: f32| format!("{:?}", x as f64);
-    let spawn_robot = |name: &str, restart: bool| -> Result<Proc> {
-        let mut c = Command::new(&node_bin);
-        c.env("ROS_DOMAIN_ID", domain.to_string())
-            .args(["--ros-args", "-r", &format!("__ns:=/{name}")])
-            .args(["-p", &format!("control_rate_hz:={}", a.rate_hz)])
-            .args(["-p", &format!("k_speed:={}", f(cfg.task.k_speed))])
-            .args(["-p", &format!("robot_radius:={}", f(sizes.robot_radius))])
-            .args([
-                "-p",
-                &format!("machine_half_x:={}", f(sizes.machine_half[0])),
-            ])
-            .args([
-                "-p",
-                &format!("machine_half_y:={}", f(sizes.machine_half[1])),
-            ])
-            .args([
-                "-p",
-                &format!("storage_half_x:={}", f(sizes.storage_half[0])),
-            ])
-            .args([
-                "-p",
-                &format!("storage_half_y:={}", f(sizes.storage_half[1])),
-            ])
-            .args(["-p", &format!("stale_timeout_s:={:?}", a.stale_timeout)])
-            .stdin(Stdio::null())
-            .stdout(Stdio::null())
-            .stderr(if restart {
-                log_append(name)?
-            } else {
-                log(name)?
-            })
-            .process_group(0); // Ctrl-C reaches us only; we stop the children in order
-        if lockstep {
-            c.args(["-p", "lockstep:=true"]);
-        }
-        if let Some(p) = &a.policy {
-            c.args(["-p", &format!("policy:={}", p.display())]);
-        }
-        for rp in &a.robot_params {
-            c.args(["-p", rp]);
-        }
-        let child = c
-            .spawn()
-            .with_context(|| format!("starting {}", node_bin.display()))?;
-        Ok(Proc {
-            name: name.to_string(),
-            child,
-        })
-    };
-    for i in 0..setup.robots {
-        procs.push(spawn_robot(&format!("robot_{i}"), false)?);
-    }
-    let mut next_robot = setup.robots;
-    let mut b = Command::new(&bridge_bin);
-    b.env("ROS_DOMAIN_ID", domain.to_string())
-        .args(["--ros-args", "-p", &format!("setup:={setup}")])
-        .args(["-p", &format!("seed:={}", a.seed)])
-        .args(["-p", &format!("mode:={}", a.mode)])
-        .args(["-p", &format!("rate_hz:={}", a.rate_hz)])
-        .args(["-p", &format!("stale_timeout_s:={:?}", a.stale_timeout)])
-        .args(["-p", "stdin_commands:=true"])
-        .stdin(Stdio::piped())
-        .stdout(Stdio::piped())
-        .stderr(log("sim_bridge")?)
-        .process_group(0);
-    if let Some(c) = &a.config {
-        b.args(["-p", &format!("config:={}", c.display())]);
-    }
-    if let Some(r) = &a.record {
-        b.args(["-p", &format!("record:={}", r.display())]);
-    }
-    if lockstep {
-        let steps = (a.duration * a.rate_hz).round().max(1.0) as u64;
-        b.args(["-p", &format!("max_steps:={steps}")]);
-    }
-    let mut bridge = b
-        .spawn()
-        .with_context(|| format!("starting {}", bridge_bin.display()))?;
-    let out = bridge.stdout.take().expect("piped");
-    let mut bridge_in = bridge.stdin.take().expect("piped");
-    procs.push(Proc {
-        name: "sim_bridge".into(),
-        child: bridge,
-    });
-    eprintln!(
-        "fleet: {} robot_node + sim_bridge, setup {setup}, {} mode, domain {domain}, controller {}, logs in {}",
-        setup.robots,
-        a.mode,
-        a.policy
-            .as_ref()
-            .map(|p| p.display().to_string())
-            .unwrap_or_else(|| "greedy".into()),
-        log_dir.display()
-    );
-
-    let (tx, rx) = std::sync::mpsc::channel::<String>();
-    std::thread::spawn(move || {
-        for line in BufReader::new(out).lines().map_while(Result::ok) {
-            if tx.send(line).is_err() {
-                break;
-            }
-        }
-    });
-
-    let (ctx_tx, ctx_rx) = std::sync::mpsc::channel::<String>();
-    if !a.no_stdin {
-        std::thread::spawn(move || {
-            for line in std::io::stdin().lock().lines().map_while(Result::ok) {
-                if ctx_tx.send(line).is_err() {
-                    break;
-                }
-            }
-        });
-    }
-
-    let t0 = Instant::now();
-    // lockstep ends when the bridge reaches max_steps; allow generous wall time for it
-    let wall_limit = if lockstep {
-        Duration::from_secs_f64(a.duration * 20.0 + 60.0)
-    } else {
-        Duration::from_secs_f64(a.duration)
-    };
-    let mut last: Option<serde_json::Value> = None;
-    let mut early_failure: Option<String> = None;
-    // watchdog restarts per robot name
-    let mut restarts: std::collections::BTreeMap<String, u32> = Default::default();
-    loop {
-        for line in ctx_rx.try_iter() {
-            let line = line.trim();
-            if line.is_empty() {
-                continue;
-            }
-            let at = t0.elapsed().as_secs_f64();
-            match parse_live(line) {
-                Err(e) => println!("fleet: t={at:.1}s error: {e}"),
-                Ok(LiveCmd::AddRobot(name)) => {
-                    let name = name.unwrap_or_else(|| {
-                        let mut n = format!("robot_{next_robot}");
-                        while procs.iter().any(|p| p.name == n) {
-                            next_robot += 1;
-                            n = format!("robot_{next_robot}");
-                        }
-                        next_robot += 1;
-                        n
-                    });
-                    if procs.iter().any(|p| p.name == name) {
-                        println!("fleet: t={at:.1}s error: {name} is already running");
-                        continue;
-                    }
-                    match spawn_robot(&name, false) {
-                        Ok(p) => {
-                            println!("fleet: t={at:.1}s started {name} (pid {})", p.child.id());
-                            procs.push(p);
-                        }
-                        Err(e) => println!("fleet: t={at:.1}s error: {e:#}"),
-                    }
-                }
-                Ok(LiveCmd::Kill(name)) | Ok(LiveCmd::Stop(name)) if name == "sim_bridge" => {
-                    println!("fleet: t={at:.1}s error: the bridge is not a robot")
-                }
-                Ok(cmd @ (LiveCmd::Kill(_) | LiveCmd::Stop(_))) => {
-                    let (name, sig, what) = match &cmd {
-                        LiveCmd::Kill(n) => (n.clone(), libc::SIGKILL, "SIGKILL"),
-                        LiveCmd::Stop(n) => (n.clone(), libc::SIGINT, "SIGINT"),
-                        _ => unreachable!(),
-                    };
-                    match procs.iter().position(|p| p.name == name) {
-                        None => println!("fleet: t={at:.1}s error: no running robot `{name}`"),
-                        Some(i) => {
-                            let mut p = procs.remove(i);
-                            signal(p.child.id(), sig);
-                            let st = if sig == libc::SIGKILL {
-                                p.child.wait().ok()
-                            } else {
-                                let until = Instant::now() + Duration::from_secs(5);
-                                loop {
-                                    match p.child.try_wait() {
-                                        Ok(Some(s)) => break Some(s),
-                                        Ok(None) if Instant::now() < until => {
-                                            std::thread::sleep(Duration::from_millis(20))
-                                        }
-                                        _ => {
-                                            let _ = p.child.kill();
-                                            break p.child.wait().ok();
-                                        }
-                                    }
-                                }
-                            };
-                            println!(
-                                "fleet: t={at:.1}s {what} {name} (pid {}): {}",
-                                p.child.id(),
-                                st.map(|s| s.to_string()).unwrap_or("?".into())
-                            );
-                        }
-                    }
-                }
-                Ok(LiveCmd::Bridge(l)) => {
-                    use std::io::Write;
-                    match writeln!(bridge_in, "{l}").and_then(|_| bridge_in.flush()) {
-                        Ok(()) => println!("fleet: t={at:.1}s sent `{l}` to sim_bridge"),
-                        Err(e) => println!("fleet: t={at:.1}s error: sim_bridge stdin: {e}"),
-                    }
-                }
-                Ok(LiveCmd::Status) => {
-                    let names: Vec<String> = procs
-                        .iter()
-                        .map(|p| format!("{}({})", p.name, p.child.id()))
-                        .collect();
-                    println!(
-                        "fleet: t={at:.1}s status: {} processes: {}; watchdog restarts: {}",
-                        names.len(),
-                        names.join(" "),
-                        restarts_summary(&restarts)
-                    );
-                    if let Some(v) = &last {
-                        println!("fleet: last metrics {v}");
-                    }
-                }
-            }
-        }
-        if stop.load(Ordering::SeqCst) {
-            eprintln!("fleet: interrupted, stopping");
-            break;
-        }
-        if t0.elapsed() >= wall_limit {
-            break;
-        }
-        match rx.recv_timeout(Duration::from_millis(100)) {
-            Ok(line) => {
-                if let Ok(v) = serde_json::from_str::<serde_json::Value>(&line) {
-                    println!(
-                        "t={:>6.1}s step={:>5} robots={:>3} delivered={:>4} collected={:>4} collisions={:>4} MU={:.3}",
-                        v["sim_time"].as_f64().unwrap_or(0.0),
-                        v["step"],
-                        v["robots"],
-                        v["parts_delivered"],
-                        v["parts_collected"],
-                        v["collisions"],
-                        v["mu"].as_f64().unwrap_or(0.0)
-                    );
-                    last = Some(v);
-                }
-            }
-            Err(std::sync::mpsc::RecvTimeoutError::Disconnected) => {
-                // bridge closed stdout: it finished (lockstep max_steps) or died
-                if let Some(i) = procs.iter().position(|p| p.name == "sim_bridge") {
-                    let _ = procs[i].child.wait();
-                }
-                break;
-            }
-            Err(_) => {}
-        }
-        // a child that exits by itself before the end is a failure, except a robot_node
-        // its watchdog ended (code 75): restarted, up to MAX_RESTARTS times per robot
-        for proc_ in procs.iter_mut() {
-            let Ok(Some(s)) = proc_.child.try_wait() else {
-                continue;
-            };
-            let name = proc_.name.clone();
-            let done = restarts.get(&name).copied().unwrap_or(0);
-            if name != "sim_bridge" && should_restart(s.code(), done) {
-                let at = t0.elapsed().as_secs_f64();
-                let old = proc_.child.id();
-                match spawn_robot(&name, true) {
-                    Ok(p) => {
-                        println!(
-                            "fleet: t={at:.1}s {name} (pid {old}) hung and was ended by its watchdog ({s}): restarted as pid {} (restart {}/{MAX_RESTARTS})",
-                            p.child.id(),
-                            done + 1
-                        );
-                        restarts.insert(name, done + 1);
-                        *proc_ = p;
-                    }
-                    Err(e) => {
-                        early_failure =
-                            Some(format!("{name} exited early ({s}); restart failed: {e:#}"))
-                    }
-                }
-            } else if name != "sim_bridge" && s.code() == Some(EXIT_WATCHDOG) {
-                early_failure = Some(format!(
-                    "{name} exited early ({s}: watchdog) after {done} restarts"
-                ));
-            } else if name != "sim_bridge" || !s.success() {
-                early_failure = Some(format!("{name} exited early ({s})"));
-            }
-        }
-        if early_failure.is_some() {
-            break;
-        }
-    }
-    let failed = shutdown(&mut procs, Duration::from_secs(5));
-    // the bridge prints one last metrics line on exit: that is the run's final state
-    while let Ok(line) = rx.recv_timeout(Duration::from_millis(500)) {
-        if let Ok(v) = serde_json::from_str::<serde_json::Value>(&line) {
-            last = Some(v);
-        }
-    }
-    if let Some(v) = &last {
-        println!("final: {v}");
-    }
-    if !restarts.is_empty() {
-        println!(
-            "fleet: robot_node watchdog restarts: {}",
-            restarts_summary(&restarts)
-        );
-    }
-    if let Some(e) = early_failure {
-        bail!("{e}; logs in {}", log_dir.display());
-    }
-    if !failed.is_empty() {
-        bail!(
-            "children failed: {}; logs in {}",
-            failed.join(", "),
-            log_dir.display()
-        );
-    }
-    if last.is_none() {
-        bail!("no metrics from sim_bridge; logs in {}", log_dir.display());
-    }
-    Ok(())
+    let mut fleet = Fleet::start(Plan::new(a)?)?;
+    fleet.supervise(&stop);
+    fleet.finish()
 }
 
-fn policy_check(p: &Path) -> Result<()> {
-    if !p.is_file() {
-        bail!("policy checkpoint {} does not exist", p.display());
+impl Fleet {
+    fn start(plan: Plan) -> Result<Fleet> {
+        let names: Vec<String> = (0..plan.setup.robots)
+            .map(|i| format!("robot_{i}"))
+            .collect();
+        let mut robots = Vec::new();
+        for group in layout::groups(&names, plan.per_process) {
+            robots.push(plan.spawn_robots(&group, false)?);
+        }
+        let (metrics_tx, metrics_rx) = std::sync::mpsc::channel();
+        let bridge = plan.spawn_bridge(false, metrics_tx.clone())?;
+        eprintln!(
+            "fleet: {} robots in {} robot_node processes + sim_bridge, setup {}, {} mode, domain {}, controller {}, logs in {}",
+            names.len(),
+            robots.len(),
+            plan.setup,
+            plan.a.mode,
+            plan.domain,
+            plan.a
+                .policy
+                .as_ref()
+                .map(|p| p.display().to_string())
+                .unwrap_or_else(|| "greedy".into()),
+            plan.log_dir.display()
+        );
+        let (cmd_tx, commands) = std::sync::mpsc::channel::<String>();
+        if !plan.a.no_stdin {
+            std::thread::spawn(move || {
+                for line in std::io::stdin().lock().lines().map_while(Result::ok) {
+                    if cmd_tx.send(line).is_err() {
+                        break;
+                    }
+                }
+            });
+        }
+        // lockstep ends when the bridge reaches max_steps; allow generous wall time for it
+        let wall_limit = if plan.lockstep {
+            Duration::from_secs_f64(plan.a.duration * 20.0 + 60.0)
+        } else {
+            Duration::from_secs_f64(plan.a.duration)
+        };
+        let health = Health::new((!plan.lockstep).then_some(plan.a.rate_hz));
+        Ok(Fleet {
+            next_robot: plan.setup.robots,
+            plan,
+            robots,
+            bridge,
+            metrics_tx,
+            metrics_rx,
+            commands,
+            t0: Instant::now(),
+            wall_limit,
+            last: None,
+            health,
+            restarts: BTreeMap::new(),
+            failure: None,
+            bridge_finished: false,
+        })
     }
-    Ok(())
+
+    fn at(&self) -> f64 {
+        self.t0.elapsed().as_secs_f64()
+    }
+
+    /// Run until the duration is over, the bridge finished, Ctrl-C, or a failure.
+    fn supervise(&mut self, stop: &AtomicBool) {
+        loop {
+            let lines: Vec<String> = self.commands.try_iter().collect();
+            for line in lines {
+                self.on_command(line.trim());
+            }
+            if stop.load(Ordering::SeqCst) {
+                eprintln!("fleet: interrupted, stopping");
+                return;
+            }
+            if self.t0.elapsed() >= self.wall_limit {
+                return;
+            }
+            match self.metrics_rx.recv_timeout(Duration::from_millis(100)) {
+                Ok(line) => self.on_metrics(&line),
+                Err(RecvTimeoutError::Timeout) => {}
+                Err(RecvTimeoutError::Disconnected) => unreachable!("we hold a sender"),
+            }
+            self.check_bridge();
+            self.check_robots();
+            if self.failure.is_some() || self.bridge_finished {
+                return;
+            }
+        }
+    }
+
+    /// Robots whose process (and the bridge) have been up longer than the start-up grace.
+    fn robots_expected(&self) -> usize {
+        if self.bridge.started.elapsed() < STARTUP_GRACE {
+            return 0;
+        }
+        self.robots
+            .iter()
+            .filter(|p| p.started.elapsed() >= STARTUP_GRACE)
+            .map(|p| p.robots.len())
+            .sum()
+    }
+
+    fn on_metrics(&mut self, line: &str) {
+        let Ok(v) = serde_json::from_str::<serde_json::Value>(line) else {
+            return;
+        };
+        let u = |k: &str| v[k].as_u64().unwrap_or(0);
+        let sample = Sample {
+            wall: self.t0.elapsed(),
+            step: u("step"),
+            sim_time: v["sim_time"].as_f64().unwrap_or(0.0),
+            robots_on_state: u("robots_on_state") as usize,
+            robots_expected: self.robots_expected(),
+            delivered: u("parts_delivered"),
+        };
+        self.health.observe(sample);
+        println!(
+            "t={:>6.1}s step={:>5} robots={:>3} on_state={:>3} delivered={:>4} collected={:>4} collisions={:>4} MU={:.3} health: {}",
+            sample.sim_time,
+            v["step"],
+            v["robots"],
+            v["robots_on_state"],
+            v["parts_delivered"],
+            v["parts_collected"],
+            v["collisions"],
+            v["mu"].as_f64().unwrap_or(0.0),
+            self.health.status()
+        );
+        self.last = Some(v);
+    }
+
+    /// The bridge exited by itself: finished (lockstep), hung (restart) or failed.
+    fn check_bridge(&mut self) {
+        let Ok(Some(s)) = self.bridge.child.try_wait() else {
+            return;
+        };
+        if s.success() {
+            self.bridge_finished = true;
+            return;
+        }
+        let done = self.restarts.get(BRIDGE).copied().unwrap_or(0);
+        if !should_restart(s.code(), done) {
+            self.failure = Some(match s.code() {
+                Some(EXIT_WATCHDOG) => {
+                    format!("{BRIDGE} hung ({s}: watchdog) after {done} restarts")
+                }
+                _ => format!("{BRIDGE} exited early ({s})"),
+            });
+            return;
+        }
+        let at = self.at();
+        match self.plan.spawn_bridge(true, self.metrics_tx.clone()) {
+            Ok(b) => {
+                println!(
+                    "fleet: t={at:.1}s {BRIDGE} (pid {}) hung and was ended by its watchdog ({s}): restarted as pid {} (restart {}/{MAX_RESTARTS}; a new episode)",
+                    self.bridge.child.id(),
+                    b.child.id(),
+                    done + 1
+                );
+                self.restarts.insert(BRIDGE.into(), done + 1);
+                self.bridge = b;
+            }
+            Err(e) => self.failure = Some(format!("{BRIDGE} hung ({s}); restart failed: {e:#}")),
+        }
+    }
+
+    /// A robot process that exits by itself before the end failed, unless its watchdog
+    /// ended it (code 75): then it is restarted, up to MAX_RESTARTS times.
+    fn check_robots(&mut self) {
+        for i in 0..self.robots.len() {
+            let Ok(Some(s)) = self.robots[i].child.try_wait() else {
+                continue;
+            };
+            let label = self.robots[i].label.clone();
+            let done = self.restarts.get(&label).copied().unwrap_or(0);
+            if !should_restart(s.code(), done) {
+                self.failure = Some(match s.code() {
+                    Some(EXIT_WATCHDOG) => {
+                        format!("{label} hung ({s}: watchdog) after {done} restarts")
+                    }
+                    _ => format!("{label} exited early ({s})"),
+                });
+                return;
+            }
+            let at = self.at();
+            let robots = self.robots[i].robots.clone();
+            match self.plan.spawn_robots(&robots, true) {
+                Ok(p) => {
+                    println!(
+                        "fleet: t={at:.1}s {label} (pid {}) hung and was ended by its watchdog ({s}): restarted as pid {} (restart {}/{MAX_RESTARTS})",
+                        self.robots[i].child.id(),
+                        p.child.id(),
+                        done + 1
+                    );
+                    self.restarts.insert(label, done + 1);
+                    self.robots[i] = p;
+                }
+                Err(e) => {
+                    self.failure = Some(format!("{label} hung ({s}); restart failed: {e:#}"));
+                    return;
+                }
+            }
+        }
+    }
+
+    fn on_command(&mut self, line: &str) {
+        if line.is_empty() {
+            return;
+        }
+        let at = self.at();
+        match parse_live(line) {
+            Err(e) => println!("fleet: t={at:.1}s error: {e}"),
+            Ok(LiveCmd::AddRobot(name)) => self.add_robot(name),
+            Ok(LiveCmd::Kill(name)) => self.remove_robot(&name, libc::SIGKILL),
+            Ok(LiveCmd::Stop(name)) => self.remove_robot(&name, libc::SIGINT),
+            Ok(LiveCmd::Bridge(l)) => {
+                match writeln!(self.bridge.stdin, "{l}").and_then(|_| self.bridge.stdin.flush()) {
+                    Ok(()) => println!("fleet: t={at:.1}s sent `{l}` to {BRIDGE}"),
+                    Err(e) => println!("fleet: t={at:.1}s error: {BRIDGE} stdin: {e}"),
+                }
+            }
+            Ok(LiveCmd::Status) => {
+                let procs: Vec<String> = self
+                    .robots
+                    .iter()
+                    .map(|p| format!("{}({})", p.label, p.child.id()))
+                    .chain([format!("{BRIDGE}({})", self.bridge.child.id())])
+                    .collect();
+                println!(
+                    "fleet: t={at:.1}s status: {} robots in {} processes: {}; health: {}; watchdog restarts: {}",
+                    self.robots.iter().map(|p| p.robots.len()).sum::<usize>(),
+                    procs.len(),
+                    procs.join(" "),
+                    self.health.status(),
+                    restarts_summary(&self.restarts)
+                );
+                if let Some(v) = &self.last {
+                    println!("fleet: last metrics {v}");
+                }
+            }
+        }
+    }
+
+    fn hosts(&self, name: &str) -> bool {
+        self.robots
+            .iter()
+            .any(|p| p.robots.iter().any(|r| r == name))
+    }
+
+    fn add_robot(&mut self, name: Option<String>) {
+        let at = self.at();
+        let name = name.unwrap_or_else(|| loop {
+            let n = format!("robot_{}", self.next_robot);
+            self.next_robot += 1;
+            if !self.hosts(&n) {
+                break n;
+            }
+        });
+        if self.hosts(&name) || name == BRIDGE {
+            println!("fleet: t={at:.1}s error: {name} is already running");
+            return;
+        }
+        match self.plan.spawn_robots(std::slice::from_ref(&name), false) {
+            Ok(p) => {
+                println!("fleet: t={at:.1}s started {name} (pid {})", p.child.id());
+                self.robots.push(p);
+            }
+            Err(e) => println!("fleet: t={at:.1}s error: {e:#}"),
+        }
+    }
+
+    /// Signal the process hosting `name`; a group process is restarted without it.
+    fn remove_robot(&mut self, name: &str, sig: i32) {
+        let at = self.at();
+        let what = if sig == libc::SIGKILL {
+            "SIGKILL"
+        } else {
+            "SIGINT"
+        };
+        if name == BRIDGE {
+            println!("fleet: t={at:.1}s error: the bridge is not a robot");
+            return;
+        }
+        let Some(i) = self
+            .robots
+            .iter()
+            .position(|p| p.robots.iter().any(|r| r == name))
+        else {
+            println!("fleet: t={at:.1}s error: no running robot `{name}`");
+            return;
+        };
+        let mut p = self.robots.remove(i);
+        signal(p.child.id(), sig);
+        let st = if sig == libc::SIGKILL {
+            p.child.wait().ok()
+        } else {
+            wait_or_kill(&mut p.child, STOP_GRACE)
+        };
+        println!(
+            "fleet: t={at:.1}s {what} {} (pid {}): {}",
+            p.label,
+            p.child.id(),
+            st.map(|s| s.to_string()).unwrap_or("killed".into())
+        );
+        let rest: Vec<String> = p.robots.into_iter().filter(|r| r != name).collect();
+        if rest.is_empty() {
+            return;
+        }
+        match self.plan.spawn_robots(&rest, true) {
+            Ok(q) => {
+                println!(
+                    "fleet: t={at:.1}s restarted {} without {name} (pid {})",
+                    q.label,
+                    q.child.id()
+                );
+                self.robots.push(q);
+            }
+            Err(e) => self.failure = Some(format!("restarting {} failed: {e:#}", rest.join(","))),
+        }
+    }
+
+    /// Stop every child, print the final state, and judge the run.
+    fn finish(self) -> Result<()> {
+        let Fleet {
+            plan,
+            mut robots,
+            mut bridge,
+            metrics_tx,
+            metrics_rx,
+            mut last,
+            health,
+            restarts,
+            failure,
+            ..
+        } = self;
+        // robots first (the bridge keeps stepping while they leave), then the bridge
+        let mut failed = Vec::new();
+        for p in robots.iter_mut() {
+            if let Ok(None) = p.child.try_wait() {
+                signal(p.child.id(), libc::SIGINT);
+            }
+        }
+        for p in robots.iter_mut() {
+            match wait_or_kill(&mut p.child, STOP_GRACE) {
+                Some(s) if !s.success() => failed.push(format!("{} ({s})", p.label)),
+                Some(_) => {}
+                None => failed.push(format!("{} (killed after {STOP_GRACE:?})", p.label)),
+            }
+        }
+        if let Ok(None) = bridge.child.try_wait() {
+            signal(bridge.child.id(), libc::SIGINT);
+        }
+        match wait_or_kill(&mut bridge.child, STOP_GRACE) {
+            Some(s) if !s.success() => failed.push(format!("{BRIDGE} ({s})")),
+            Some(_) => {}
+            None => failed.push(format!("{BRIDGE} (killed after {STOP_GRACE:?})")),
+        }
+        drop(metrics_tx);
+        // the bridge prints one last metrics line on exit: the run's final state
+        while let Ok(line) = metrics_rx.recv_timeout(Duration::from_millis(500)) {
+            if let Ok(v) = serde_json::from_str::<serde_json::Value>(&line) {
+                last = Some(v);
+            }
+        }
+        if let Some(v) = &last {
+            println!("final: {v}");
+        }
+        // health is judged on what the run showed while it ran: the final line comes after
+        // the robots were stopped
+        println!(
+            "fleet: health: {}; watchdog restarts: {}",
+            health.summary(),
+            restarts_summary(&restarts)
+        );
+        let logs = plan.log_dir.display();
+        if let Some(e) = failure {
+            bail!("{e}; logs in {logs}");
+        }
+        if !failed.is_empty() {
+            bail!("children failed: {}; logs in {logs}", failed.join(", "));
+        }
+        if let Some(why) = health.verdict() {
+            bail!("the fleet did not work: {why}; logs in {logs}");
+        }
+        Ok(())
+    }
 }
 
 #[cfg(test)]
@@ -638,58 +792,10 @@ mod tests {
         for other in [Some(0), Some(1), Some(2), None] {
             assert!(!should_restart(other, 0), "{other:?}");
         }
-        let mut r = std::collections::BTreeMap::new();
+        let mut r = BTreeMap::new();
         assert_eq!(restarts_summary(&r), "none");
         r.insert("robot_7".to_string(), 2);
         r.insert("robot_3".to_string(), 1);
         assert_eq!(restarts_summary(&r), "robot_3 x1, robot_7 x2");
-    }
-
-    #[test]
-    fn live_commands_parse() {
-        assert_eq!(parse_live("add robot"), Ok(LiveCmd::AddRobot(None)));
-        assert_eq!(
-            parse_live("add robot rover_1"),
-            Ok(LiveCmd::AddRobot(Some("rover_1".into())))
-        );
-        assert_eq!(
-            parse_live("kill /robot_3"),
-            Ok(LiveCmd::Kill("robot_3".into()))
-        );
-        assert_eq!(
-            parse_live("stop robot_3"),
-            Ok(LiveCmd::Stop("robot_3".into()))
-        );
-        assert_eq!(
-            parse_live("add machine"),
-            Ok(LiveCmd::Bridge("add_machine".into()))
-        );
-        assert_eq!(
-            parse_live("add machine 0.5 -0.25"),
-            Ok(LiveCmd::Bridge("add_machine 0.5 -0.25".into()))
-        );
-        assert_eq!(
-            parse_live("remove machine 2"),
-            Ok(LiveCmd::Bridge("remove_machine 2".into()))
-        );
-        assert_eq!(
-            parse_live("add storage"),
-            Ok(LiveCmd::Bridge("add_storage".into()))
-        );
-        assert_eq!(
-            parse_live("remove storage 1"),
-            Ok(LiveCmd::Bridge("remove_storage 1".into()))
-        );
-        assert_eq!(parse_live("status"), Ok(LiveCmd::Status));
-        for bad in [
-            "add machine 1",
-            "add machine nan 0",
-            "remove machine x",
-            "kill 3robot",
-            "kill machine_0",
-            "fly",
-        ] {
-            assert!(parse_live(bad).is_err(), "{bad}");
-        }
     }
 }

@@ -147,10 +147,6 @@ def test_every_bridge_publication_has_the_contract_type(bridge):
         assert t in topics, t
 
 
-@pytest.mark.xfail(strict=True, reason=(
-    'ros2-client 0.12 Spinner always creates a /clock reader typed builtin_interfaces/msg/Time '
-    '(best effort), so the graph shows /clock with two types (ros2 topic echo /clock then '
-    'needs an explicit type; RustDDS logs "Inconsistent topic update" in sim_bridge)'))
 def test_clock_has_only_the_contract_type_in_the_graph(bridge):
     types = dict(bridge.ros.node.get_topic_names_and_types()).get('/clock')
     assert types == ['rosgraph_msgs/msg/Clock'], types

@@ -416,18 +416,18 @@ def test_rust_subscription_qos(live, topic):
     assert q.durability == durability, f'{topic}: {q}'
 
 
-@pytest.mark.xfail(strict=True, reason=(
-    'ros2-client 0.12 Spinner always subscribes /clock as builtin_interfaces/msg/Time '
-    '(best effort, even without use_sim_time): a reader outside the contract, and /clock '
-    'gets a second type in the graph next to rosgraph_msgs/msg/Clock'))
 def test_no_reader_outside_the_contract(live):
-    """Graph-wide (attributed to the node or not): robot_node reads only contract topics."""
+    """Graph-wide (attributed to the node or not): robot_node reads only contract topics,
+    each with its contract type. /clock (rosgraph_msgs/Clock) is in the contract: the
+    ros2-client spinner reads it for use_sim_time."""
     ros, _ = live
     mine = ros.node.get_name()
+    allowed = {t: typ for t, (typ, _) in RUST_SUBSCRIBES.items()}
+    allowed['/clock'] = 'rosgraph_msgs/msg/Clock'
     extra = {}
     for topic, _ in ros.node.get_topic_names_and_types():
         for ep in ros.node.get_subscriptions_info_by_topic(topic):
-            if ep.node_name != mine and topic not in RUST_SUBSCRIBES \
-                    and topic not in ('/parameter_events',):
+            if ep.node_name != mine and topic != '/parameter_events' \
+                    and allowed.get(topic) != ep.topic_type:
                 extra.setdefault(topic, set()).add(ep.topic_type)
     assert not extra, extra
