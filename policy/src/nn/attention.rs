@@ -81,10 +81,24 @@ fn sized(v: &mut Vec<f32>, n: usize) -> &mut [f32] {
     &mut v[..n]
 }
 
-/// Dot product in the summation order of [`super::dot`] (8 lanes, fixed combine), inlined
-/// into the dispatched kernels so it is compiled for their instruction set.
+/// Dot product in the summation order of [`super::dot`] (8 lanes, fixed combine). The
+/// compiler turns the 8-accumulator loop into shuffles of 4-wide halves, so where the CPU
+/// has AVX2 the 8 lanes are one explicit 256-bit register: the same additions and
+/// multiplications in the same order (no FMA), hence the same bits.
 #[inline(always)]
 fn dot(a: &[f32], b: &[f32]) -> f32 {
+    #[cfg(target_arch = "x86_64")]
+    {
+        if super::simd::level() >= super::simd::Level::Avx2 {
+            // SAFETY: the level is Avx2 or higher only when the CPU has AVX2.
+            return unsafe { dot_avx2(a, b) };
+        }
+    }
+    dot_scalar(a, b)
+}
+
+#[inline(always)]
+fn dot_scalar(a: &[f32], b: &[f32]) -> f32 {
     let n = a.len().min(b.len());
     let (a, b) = (&a[..n], &b[..n]);
     let mut acc = [0.0f32; 8];
@@ -98,6 +112,34 @@ fn dot(a: &[f32], b: &[f32]) -> f32 {
     let mut s = (acc[0] + acc[4]) + (acc[1] + acc[5]) + ((acc[2] + acc[6]) + (acc[3] + acc[7]));
     for (x, y) in ra.iter().zip(rb) {
         s += x * y;
+    }
+    s
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+#[inline]
+unsafe fn dot_avx2(a: &[f32], b: &[f32]) -> f32 {
+    use std::arch::x86_64::*;
+    let n = a.len().min(b.len());
+    let chunks = n / 8;
+    let mut acc = _mm256_setzero_ps();
+    for c in 0..chunks {
+        // SAFETY: 8 * c + 8 <= n <= both lengths.
+        let (x, y) = unsafe {
+            (
+                _mm256_loadu_ps(a.as_ptr().add(8 * c)),
+                _mm256_loadu_ps(b.as_ptr().add(8 * c)),
+            )
+        };
+        acc = _mm256_add_ps(acc, _mm256_mul_ps(x, y));
+    }
+    let mut l = [0.0f32; 8];
+    // SAFETY: l has 8 floats.
+    unsafe { _mm256_storeu_ps(l.as_mut_ptr(), acc) };
+    let mut s = (l[0] + l[4]) + (l[1] + l[5]) + ((l[2] + l[6]) + (l[3] + l[7]));
+    for i in chunks * 8..n {
+        s += a[i] * b[i];
     }
     s
 }
@@ -819,6 +861,16 @@ mod tests {
             for (i, (x, y)) in g.iter().zip(&g_ref).enumerate() {
                 assert!((x - y).abs() <= 1e-5 * scale, "grad[{i}] {x} vs {y}");
             }
+        }
+    }
+
+    #[test]
+    fn dot_avx2_has_the_scalar_bits() {
+        for n in [0, 3, 8, 16, 64, 67] {
+            let (a, b) = (rand_vec(n, 1), rand_vec(n, 2));
+            let want = dot_scalar(&a, &b);
+            assert_eq!(want.to_bits(), crate::nn::dot(&a, &b).to_bits());
+            assert_eq!(want.to_bits(), dot(&a, &b).to_bits());
         }
     }
 }
