@@ -2,10 +2,16 @@
 //! repeated, for profilers and for side-by-side timing:
 //! `cargo run --release -p policy --example ppo_step -- [steps] [actor|critic]`.
 //! Prints one line per step: milliseconds.
+//!
+//! `ppo_step export CHECKPOINT OUT.safetensors`: the actor of CHECKPOINT, one batch of the
+//! same shape, its logits and the PPO loss gradient of every parameter (before clipping
+//! and Adam), for `bench/learner/torch_side_by_side.py` to check that PyTorch computes the
+//! same function.
 
 use obs::{Counts, ObsBatch};
-use policy::{Actor, ArchConfig, Critic, PpoActorConfig, ValueLossConfig};
+use policy::{Actor, ArchConfig, Critic, Policy, PpoActorConfig, ValueLossConfig};
 use rand::{Rng, SeedableRng};
+use safetensors::tensor::{Dtype, TensorView};
 use std::time::Instant;
 
 fn rand_obs(rows: usize, c: Counts, rng: &mut impl Rng) -> ObsBatch {
@@ -27,8 +33,120 @@ fn rand_obs(rows: usize, c: Counts, rng: &mut impl Rng) -> ObsBatch {
     b
 }
 
+struct Batch {
+    obs: ObsBatch,
+    h0: Vec<f32>,
+    masks: Vec<f32>,
+    actions: Vec<u8>,
+    old_logp: Vec<f32>,
+    adv: Vec<f32>,
+}
+
+/// The actor batch: T = 10 x B = 480 rows at 14.10_4, episode starts every 97 rows.
+fn actor_batch(rng: &mut impl Rng) -> Batch {
+    let c = Counts {
+        machines: 10,
+        storages: 4,
+        peers: 13,
+    };
+    let (t, b) = (10, 480);
+    let obs = rand_obs(t * b, c, rng);
+    let h0: Vec<f32> = (0..b * 64).map(|_| rng.gen_range(-0.5..0.5)).collect();
+    let masks: Vec<f32> = (0..t * b)
+        .map(|i| if i % 97 == 0 { 0.0 } else { 1.0 })
+        .collect();
+    let actions: Vec<u8> = (0..t * b).map(|_| rng.gen_range(0..5)).collect();
+    let old_logp = vec![-1.6f32; t * b];
+    let adv: Vec<f32> = (0..t * b).map(|_| rng.gen_range(-1.0..1.0)).collect();
+    Batch {
+        obs,
+        h0,
+        masks,
+        actions,
+        old_logp,
+        adv,
+    }
+}
+
+fn export(ckpt: &str, out: &str) {
+    let mut rng = rand::rngs::StdRng::seed_from_u64(0);
+    let bt = actor_batch(&mut rng);
+    let mut actor = Policy::load(ckpt).expect("checkpoint").actor().clone();
+    let (t, b) = (10, 480);
+    let logits = actor
+        .forward_seq(&bt.obs, t, b, &bt.h0, &bt.masks)
+        .unwrap()
+        .to_vec();
+    actor.params.zero_grad();
+    let st = actor
+        .ppo_grads(
+            &bt.obs,
+            t,
+            b,
+            &bt.h0,
+            &bt.masks,
+            &bt.actions,
+            &bt.old_logp,
+            &bt.adv,
+            PpoActorConfig::default(),
+        )
+        .unwrap();
+    let n = t * b;
+    let c = bt.obs.counts;
+    let f = |v: &[f32]| -> Vec<u8> { v.iter().flat_map(|x| x.to_le_bytes()).collect() };
+    let acts: Vec<f32> = bt.actions.iter().map(|&a| a as f32).collect();
+    let mut tensors: Vec<(String, Vec<usize>, Vec<u8>)> = vec![
+        ("in.own".into(), vec![n, 3], f(&bt.obs.own)),
+        (
+            "in.machines".into(),
+            vec![n, c.machines, 3],
+            f(&bt.obs.machines),
+        ),
+        (
+            "in.storages".into(),
+            vec![n, c.storages, 2],
+            f(&bt.obs.storages),
+        ),
+        ("in.peers".into(), vec![n, c.peers, 3], f(&bt.obs.peers)),
+        ("in.h0".into(), vec![b, 64], f(&bt.h0)),
+        ("in.masks".into(), vec![t, b], f(&bt.masks)),
+        ("in.actions".into(), vec![n], f(&acts)),
+        ("in.old_logp".into(), vec![n], f(&bt.old_logp)),
+        ("in.adv".into(), vec![n], f(&bt.adv)),
+        ("out.logits".into(), vec![n, 5], f(&logits)),
+        ("out.loss".into(), vec![1], f(&[st.loss])),
+    ];
+    for e in &actor.params.entries {
+        tensors.push((
+            format!("param.{}", e.name),
+            e.shape.clone(),
+            f(&actor.params.data[e.slot.r()]),
+        ));
+        tensors.push((
+            format!("grad.{}", e.name),
+            e.shape.clone(),
+            f(&actor.params.grad[e.slot.r()]),
+        ));
+    }
+    let views: Vec<(String, TensorView)> = tensors
+        .iter()
+        .map(|(k, s, d)| {
+            (
+                k.clone(),
+                TensorView::new(Dtype::F32, s.clone(), d).unwrap(),
+            )
+        })
+        .collect();
+    std::fs::write(out, safetensors::serialize(views, &None).unwrap()).unwrap();
+    println!("wrote {out}: loss {}", st.loss);
+}
+
 fn main() {
     let a: Vec<String> = std::env::args().skip(1).collect();
+    if a.first().map(String::as_str) == Some("export") {
+        export(&a[1], &a[2]);
+        return;
+    }
     let steps: usize = a.first().and_then(|x| x.parse().ok()).unwrap_or(20);
     let critic_only = a.get(1).map(String::as_str) == Some("critic");
     let mut rng = rand::rngs::StdRng::seed_from_u64(0);
@@ -67,14 +185,14 @@ fn main() {
         return;
     }
     let b = 480;
-    let obs = rand_obs(t * b, c, &mut rng);
-    let h0: Vec<f32> = (0..b * 64).map(|_| rng.gen_range(-0.5..0.5)).collect();
-    let masks: Vec<f32> = (0..t * b)
-        .map(|i| if i % 97 == 0 { 0.0 } else { 1.0 })
-        .collect();
-    let actions: Vec<u8> = (0..t * b).map(|_| rng.gen_range(0..5)).collect();
-    let old_logp = vec![-1.6f32; t * b];
-    let adv: Vec<f32> = (0..t * b).map(|_| rng.gen_range(-1.0..1.0)).collect();
+    let Batch {
+        obs,
+        h0,
+        masks,
+        actions,
+        old_logp,
+        adv,
+    } = actor_batch(&mut rng);
     let mut actor = Actor::new(ArchConfig::smappo(), 1);
     for _ in 0..steps {
         let t0 = Instant::now();
