@@ -65,6 +65,126 @@ pub fn gemm(
         small(m, k, n, alpha, a, b, beta, c, rsc);
         return;
     }
+    if m * k * n >= PAR_MIN_MACS {
+        if m >= 2 * ROW_CHUNK {
+            return par_rows(m, k, n, alpha, a, b, beta, c, rsc);
+        }
+        if k >= 2 * K_CHUNK {
+            return par_inner(m, k, n, alpha, a, b, beta, c, rsc);
+        }
+    }
+    sgemm(m, k, n, alpha, a, b, beta, c, rsc);
+}
+
+/// Below this many multiply-adds a GEMM runs on the calling thread (a rayon hand-off
+/// costs some microseconds).
+const PAR_MIN_MACS: usize = 1 << 20;
+/// Rows per parallel piece of a tall GEMM. Each element of C is computed exactly as by one
+/// call, so the result does not depend on the split (test).
+const ROW_CHUNK: usize = 256;
+/// Inner-dimension piece of a GEMM with few rows and a long inner dimension (weight
+/// gradients summed over the batch): partial products are added in piece order, so the
+/// result is the same for any thread count (and differs from one call only by summation
+/// order).
+const K_CHUNK: usize = 1024;
+
+thread_local! {
+    static PARTIALS: std::cell::RefCell<Vec<f32>> = const { std::cell::RefCell::new(Vec::new()) };
+}
+
+#[allow(clippy::too_many_arguments)]
+fn par_rows(
+    m: usize,
+    k: usize,
+    n: usize,
+    alpha: f32,
+    a: View,
+    b: View,
+    beta: f32,
+    c: &mut [f32],
+    rsc: usize,
+) {
+    use rayon::prelude::*;
+    let c = &mut c[..(m - 1) * rsc + n];
+    c.par_chunks_mut(ROW_CHUNK * rsc)
+        .enumerate()
+        .for_each(|(i, cc)| {
+            let r0 = i * ROW_CHUNK;
+            let rows = ROW_CHUNK.min(m - r0);
+            let av = View {
+                data: &a.data[r0 * a.rs..],
+                rs: a.rs,
+                cs: a.cs,
+            };
+            sgemm(rows, k, n, alpha, av, b, beta, cc, rsc);
+        });
+}
+
+#[allow(clippy::too_many_arguments)]
+fn par_inner(
+    m: usize,
+    k: usize,
+    n: usize,
+    alpha: f32,
+    a: View,
+    b: View,
+    beta: f32,
+    c: &mut [f32],
+    rsc: usize,
+) {
+    use rayon::prelude::*;
+    let pieces = k.div_ceil(K_CHUNK);
+    PARTIALS.with_borrow_mut(|parts| {
+        parts.resize(pieces * m * n, 0.0);
+        parts.par_chunks_mut(m * n).enumerate().for_each(|(i, pc)| {
+            let k0 = i * K_CHUNK;
+            let kk = K_CHUNK.min(k - k0);
+            let av = View {
+                data: &a.data[k0 * a.cs..],
+                rs: a.rs,
+                cs: a.cs,
+            };
+            let bv = View {
+                data: &b.data[k0 * b.rs..],
+                rs: b.rs,
+                cs: b.cs,
+            };
+            sgemm(m, kk, n, alpha, av, bv, 0.0, pc, n);
+        });
+        for i in 0..m {
+            let crow = &mut c[i * rsc..i * rsc + n];
+            if beta == 0.0 {
+                crow.iter_mut().for_each(|x| *x = 0.0);
+            } else if beta != 1.0 {
+                crow.iter_mut().for_each(|x| *x *= beta);
+            }
+            for pc in parts.chunks_exact(m * n) {
+                for (x, y) in crow.iter_mut().zip(&pc[i * n..(i + 1) * n]) {
+                    *x += y;
+                }
+            }
+        }
+    });
+}
+
+/// One `matrixmultiply` call (bounds already checked by the caller).
+#[allow(clippy::too_many_arguments)]
+fn sgemm(
+    m: usize,
+    k: usize,
+    n: usize,
+    alpha: f32,
+    a: View,
+    b: View,
+    beta: f32,
+    c: &mut [f32],
+    rsc: usize,
+) {
+    if k > 0 {
+        assert!((m - 1) * a.rs + (k - 1) * a.cs < a.data.len());
+        assert!((k - 1) * b.rs + (n - 1) * b.cs < b.data.len());
+    }
+    assert!((m - 1) * rsc + (n - 1) < c.len());
     // SAFETY: the asserts above keep every access inside the slices; A/B are only read and C
     // is a unique borrow.
     unsafe {
@@ -180,6 +300,51 @@ mod tests {
                     assert!((x - y).abs() < 1e-5);
                 }
             }
+        }
+    }
+
+    /// Tall GEMMs split into row pieces give exactly one call's bits; long inner
+    /// dimensions split into pieces give the same bits on 1 and 2 threads and agree with
+    /// one call up to summation order.
+    #[test]
+    fn parallel_splits_match_one_call() {
+        use crate::nn::gradcheck::rand_vec;
+        let pool = |t| {
+            rayon::ThreadPoolBuilder::new()
+                .num_threads(t)
+                .build()
+                .unwrap()
+        };
+        // rows: C (700 x 70, row stride 80) = A (700 x 64) * B^T
+        let (m, k, n, rsc) = (700, 64, 70, 80);
+        let a = rand_vec(m * k, 1);
+        let b = rand_vec(n * k, 2);
+        let c0 = rand_vec(m * rsc, 3);
+        let mut one = c0.clone();
+        sgemm(m, k, n, 0.5, rm(&a, k), tr(&b, k), 1.0, &mut one, rsc);
+        for t in [1, 2] {
+            let mut c = c0.clone();
+            pool(t).install(|| gemm(m, k, n, 0.5, rm(&a, k), tr(&b, k), 1.0, &mut c, rsc));
+            assert_eq!(c, one);
+        }
+        // inner: C (16 x 64) += dY^T (16 x 5000) X (5000 x 64)
+        let (m, k, n) = (16, 5000, 64);
+        let dy = rand_vec(k * m, 4);
+        let x = rand_vec(k * n, 5);
+        let c0 = rand_vec(m * n, 6);
+        let mut one = c0.clone();
+        sgemm(m, k, n, 1.0, tr(&dy, m), rm(&x, n), 1.0, &mut one, n);
+        let runs: Vec<Vec<f32>> = [1, 2]
+            .into_iter()
+            .map(|t| {
+                let mut c = c0.clone();
+                pool(t).install(|| gemm(m, k, n, 1.0, tr(&dy, m), rm(&x, n), 1.0, &mut c, n));
+                c
+            })
+            .collect();
+        assert_eq!(runs[0], runs[1]);
+        for (x, y) in runs[0].iter().zip(&one) {
+            assert!((x - y).abs() < 1e-3, "{x} vs {y}");
         }
     }
 }
