@@ -59,6 +59,35 @@ fn realtime_fleet_delivers_parts_and_stops_cleanly() {
     assert_eq!(m["cmds_dropped_non_finite"], 0, "{m}");
 }
 
+/// Robots grouped several per robot_node process (what large fleets get by default) work
+/// like one process per robot: every robot acts on the bridge's state and parts arrive.
+#[test]
+fn grouped_robot_processes_keep_every_robot_on_state() {
+    let domain = (std::process::id() % 30) as u16 + 200;
+    let out = Command::new(tending())
+        .args(["fleet", "--setup", "6.4_2", "--duration", "12"])
+        .args(["--robots-per-process", "3", "--no-stdin"])
+        .args(["--domain", &domain.to_string()])
+        .output()
+        .unwrap();
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        out.status.success(),
+        "fleet failed: {}\n{stdout}\n{stderr}",
+        out.status
+    );
+    assert!(
+        stderr.contains("6 robots in 2 robot_node processes"),
+        "{stderr}"
+    );
+    let m = final_metrics(&stdout);
+    assert_eq!(m["robots"], 6, "{m}");
+    assert!(m["parts_delivered"].as_u64().unwrap() > 0, "{m}");
+    // health lines: every robot acting on state once started
+    assert!(stdout.contains("on_state=6 "), "{stdout}");
+}
+
 #[test]
 fn lockstep_fleet_ends_at_the_requested_sim_time() {
     let domain = (std::process::id() % 50) as u16 + 100;

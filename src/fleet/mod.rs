@@ -234,6 +234,10 @@ impl Plan {
                 .and_then(|d| d.trim().parse().ok())
                 .unwrap_or(0)
         });
+        // the ROS 2 limit (RTPS port arithmetic): refused here once, not by every child
+        if domain > 232 {
+            bail!("ROS domain id {domain} (--domain or ROS_DOMAIN_ID) is above 232");
+        }
         let log_dir = a.log_dir.clone().unwrap_or_else(|| {
             std::env::temp_dir().join(format!("tending-fleet-{}", std::process::id()))
         });
