@@ -22,27 +22,37 @@ pub struct GreedyParams {
 
 const MOVES: [[f32; 2]; 5] = [[0.0, 0.0], [-1.0, 0.0], [1.0, 0.0], [0.0, -1.0], [0.0, 1.0]];
 
-/// Decentralized greedy: without a part, head for the nearest ready machine that no
-/// nearer part-less peer is closer to; with a part, the nearest storage. Moves on one axis
-/// at a time (the 5-action set), preferring the axis with the larger gap, and avoids a
-/// move that would bring it into contact with a peer or a box other than its target.
-pub fn greedy_action(
+/// The box a greedy robot heads for, relative to the robot.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Target {
+    /// Box centre relative to the robot.
+    pub rel: [f32; 2],
+    /// Half extents of the box.
+    pub half: [f32; 2],
+}
+
+/// Greedy task allocation: without a part, the nearest ready machine that no nearer
+/// part-less peer is closer to; with a part, the nearest storage. None: nothing to do.
+/// Shared by [`greedy_action`] and [`crate::orca`], so both allocate tasks alike.
+pub fn greedy_target(
     own: &[f32],
     machines: &[f32],
     storages: &[f32],
     peers: &[f32],
     p: &GreedyParams,
-) -> u8 {
+) -> Option<Target> {
     let has_part = own[2] > 0.5;
-    let r = p.robot_radius;
-    let mut target: Option<([f32; 2], [f32; 2])> = None; // (relative centre, half)
+    let mut target = None;
     if has_part {
         let mut best = f32::INFINITY;
         for s in storages.chunks_exact(2) {
             let d = s[0] * s[0] + s[1] * s[1];
             if d < best {
                 best = d;
-                target = Some(([s[0], s[1]], p.storage_half));
+                target = Some(Target {
+                    rel: [s[0], s[1]],
+                    half: p.storage_half,
+                });
             }
         }
     } else {
@@ -61,11 +71,29 @@ pub fn greedy_action(
             });
             if !claimed && mine < best {
                 best = mine;
-                target = Some(([m[0], m[1]], p.machine_half));
+                target = Some(Target {
+                    rel: [m[0], m[1]],
+                    half: p.machine_half,
+                });
             }
         }
     }
-    let Some((t, _half)) = target else {
+    target
+}
+
+/// Decentralized greedy: heads for [`greedy_target`]. Moves on one axis
+/// at a time (the 5-action set), preferring the axis with the larger gap, and avoids a
+/// move that would bring it into contact with a peer or a box other than its target.
+pub fn greedy_action(
+    own: &[f32],
+    machines: &[f32],
+    storages: &[f32],
+    peers: &[f32],
+    p: &GreedyParams,
+) -> u8 {
+    let has_part = own[2] > 0.5;
+    let r = p.robot_radius;
+    let Some(Target { rel: t, .. }) = greedy_target(own, machines, storages, peers, p) else {
         return 0;
     };
     let step = p.k_speed * p.dt;

@@ -14,7 +14,10 @@
 //! one GEMM per group.
 
 mod flat;
+pub mod geom;
 pub mod greedy;
+pub mod orca;
+pub mod shield;
 
 pub use flat::{FlatLayout, FLAT_PAD};
 

@@ -1,10 +1,13 @@
-//! Scripted baselines a factory engineer would write first.
+//! Scripted baselines a factory engineer would write first, and the action shield.
 //!
-//! Both are decentralized: each robot decides from its own observation row (the same
+//! All are decentralized: each robot decides from its own observation row (the same
 //! [`obs::ObsBatch`] a learned policy gets) plus the fleet's known body sizes, so they run
 //! unchanged on a robot.
 
-use crate::{Sizes, N_ACTIONS};
+use crate::{Env, ScenarioConfig, SimError, Sizes, N_ACTIONS};
+use obs::orca::{GreedyOrca, OrcaParams};
+use obs::shield::ShieldParams;
+use obs::ObsBatch;
 use rand::Rng;
 
 /// Uniformly random actions.
@@ -43,6 +46,89 @@ impl GreedyParams {
             k_speed: self.k_speed,
             dt: self.dt,
         }
+    }
+}
+
+/// Greedy-ORCA parameters of an environment (its sizes, speed, period and room).
+pub fn orca_params(sizes: &Sizes, cfg: &ScenarioConfig) -> OrcaParams {
+    let g = GreedyParams {
+        sizes: *sizes,
+        k_speed: cfg.task.k_speed,
+        dt: cfg.world.dt,
+    };
+    OrcaParams::new(g.to_obs(), cfg.world.room_size, sizes.reach)
+}
+
+/// Shield parameters of an environment. The margin is the simulator's collision distance
+/// plus 10 mm for the velocity tracker's lag behind a command.
+pub fn shield_params(sizes: &Sizes, cfg: &ScenarioConfig) -> ShieldParams {
+    let mut p = ShieldParams::new(
+        sizes.robot_radius,
+        sizes.machine_half,
+        sizes.storage_half,
+        cfg.task.k_speed,
+        cfg.world.dt,
+        cfg.world.room_size,
+    );
+    p.margin = cfg.task.collision_distance + 0.01;
+    p
+}
+
+/// One [`GreedyOrca`] per robot of an environment (each keeps what it saw last step).
+#[derive(Debug, Clone)]
+pub struct GreedyOrcaFleet {
+    robots: Vec<GreedyOrca>,
+}
+
+impl GreedyOrcaFleet {
+    /// Controllers for every robot of `env` as it is now.
+    pub fn new(env: &Env) -> Result<Self, SimError> {
+        let p = orca_params(env.sizes(), env.config());
+        let one = GreedyOrca::new(p).map_err(|reason| SimError::BadConfig {
+            field: "greedy-orca".into(),
+            reason,
+        })?;
+        Ok(Self {
+            robots: vec![one; env.n_robots()],
+        })
+    }
+
+    /// Velocity commands for every row of `obs` (rows = robots, in robot order).
+    pub fn act(&mut self, obs: &ObsBatch, out: &mut Vec<[f32; 2]>) -> Result<(), SimError> {
+        if obs.rows != self.robots.len() {
+            return Err(SimError::WrongCommandCount {
+                expected: self.robots.len(),
+                got: obs.rows,
+            });
+        }
+        out.clear();
+        out.extend(self.robots.iter_mut().enumerate().map(|(r, c)| {
+            c.velocity(
+                obs.own_row(r),
+                obs.machines_row(r),
+                obs.storages_row(r),
+                obs.peers_row(r),
+            )
+        }));
+        Ok(())
+    }
+}
+
+/// Apply the shield to every row of `logits` (rows x N_ACTIONS) from the rows of `obs`.
+pub fn shield_logits(obs: &ObsBatch, logits: &mut [f32], p: &ShieldParams) {
+    for (r, row) in logits
+        .chunks_exact_mut(N_ACTIONS)
+        .enumerate()
+        .take(obs.rows)
+    {
+        let safe = obs::shield::safe_actions(
+            obs.own_row(r),
+            obs.machines_row(r),
+            obs.storages_row(r),
+            obs.peers_row(r),
+            p,
+        );
+        obs::shield::mask_logits(row, &safe);
     }
 }
 

@@ -1,0 +1,89 @@
+//! Greedy-ORCA against plain greedy: same allocation, ORCA avoidance instead of greedy's
+//! axis moves. It must deliver at least as many parts with far fewer contacts.
+
+use sim::baselines::{greedy_action, GreedyOrcaFleet, GreedyParams};
+use sim::{episode_seed, Env, Metrics, ScenarioConfig, Setup};
+
+fn episode(setup: Setup, seed: u64, orca: bool) -> Metrics {
+    let cfg = ScenarioConfig::default();
+    let mut env = Env::new(cfg.clone(), setup, seed).unwrap();
+    let gp = GreedyParams {
+        sizes: *env.sizes(),
+        k_speed: cfg.task.k_speed,
+        dt: cfg.world.dt,
+    };
+    let mut fleet = GreedyOrcaFleet::new(&env).unwrap();
+    let mut o = obs::ObsBatch::default();
+    let (mut acts, mut vels) = (Vec::new(), Vec::new());
+    while !env.is_done() {
+        env.observe(&mut o);
+        if orca {
+            fleet.act(&o, &mut vels).unwrap();
+            env.step_velocities(&vels).unwrap();
+        } else {
+            acts.clear();
+            acts.extend((0..o.rows).map(|r| {
+                greedy_action(
+                    o.own_row(r),
+                    o.machines_row(r),
+                    o.storages_row(r),
+                    o.peers_row(r),
+                    &gp,
+                )
+            }));
+            env.step_actions(&acts).unwrap();
+        }
+    }
+    *env.metrics()
+}
+
+/// Sums over `n` episodes: (parts, robot-robot contacts, all contacts).
+fn totals(setup: &str, orca: bool, n: u64) -> (u32, u32, u32) {
+    let setup: Setup = setup.parse().unwrap();
+    (0..n)
+        .map(|e| episode(setup, episode_seed(7, 0, e), orca))
+        .fold((0, 0, 0), |t, m| {
+            (
+                t.0 + m.parts_delivered,
+                t.1 + m.collisions_robot_robot,
+                t.2 + m.collisions,
+            )
+        })
+}
+
+#[test]
+fn greedy_orca_delivers_as_much_as_greedy_with_far_fewer_contacts() {
+    let (mut rr_greedy, mut rr_orca) = (0, 0);
+    for setup in ["6.4_2", "12.8_4", "24.16_8", "42.28_14"] {
+        let (pg, rrg, cg) = totals(setup, false, 8);
+        let (po, rro, co) = totals(setup, true, 8);
+        eprintln!(
+            "{setup}: greedy parts {pg} rr {rrg} all {cg}; greedy-orca parts {po} rr {rro} all {co}"
+        );
+        assert!(po >= pg, "{setup}: greedy-orca {po} parts < greedy {pg}");
+        assert!(
+            co * 5 <= cg,
+            "{setup}: greedy-orca {co} contacts, not 5x fewer than greedy's {cg}"
+        );
+        rr_greedy += rrg;
+        rr_orca += rro;
+    }
+    assert!(
+        rr_orca * 3 <= rr_greedy,
+        "robot-robot contacts: greedy-orca {rr_orca}, greedy {rr_greedy}"
+    );
+}
+
+#[test]
+fn greedy_orca_refuses_a_fleet_of_the_wrong_size() {
+    let env = Env::new(ScenarioConfig::default(), "3.2_1".parse().unwrap(), 0).unwrap();
+    let mut fleet = GreedyOrcaFleet::new(&env).unwrap();
+    let mut o = obs::ObsBatch::default();
+    env.observe(&mut o);
+    let mut vels = Vec::new();
+    fleet.act(&o, &mut vels).unwrap();
+    assert_eq!(vels.len(), 3);
+    assert!(vels.iter().flatten().all(|v| v.is_finite()));
+    let one = o.row(0);
+    assert!(fleet.act(&one, &mut vels).is_err());
+}
