@@ -6,7 +6,9 @@ use crate::Actor;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use rayon::prelude::*;
-use sim::baselines::{greedy_action, random_action, GreedyParams};
+use sim::baselines::{
+    greedy_action, random_action, shield_logits, shield_params, GreedyOrcaFleet, GreedyParams,
+};
 use sim::{episode_seed, Env, Metrics, ScenarioConfig, Setup};
 
 /// Who picks the actions.
@@ -17,7 +19,14 @@ pub enum Controller {
         actor: Box<Actor>,
         sample: bool,
     },
+    /// The learned actor behind the one-step action shield (`obs::shield`).
+    Shielded {
+        actor: Box<Actor>,
+        sample: bool,
+    },
     Greedy,
+    /// Greedy task allocation + ORCA avoidance (`obs::orca`), continuous velocities.
+    GreedyOrca,
     Random,
 }
 
@@ -43,9 +52,18 @@ pub fn run_episode(
         dt: cfg.world.dt,
     };
     let mut actor = match ctrl {
-        Controller::Learned { actor, .. } => Some(actor.as_ref().clone()),
+        Controller::Learned { actor, .. } | Controller::Shielded { actor, .. } => {
+            Some(actor.as_ref().clone())
+        }
         _ => None,
     };
+    let shield = shield_params(env.sizes(), cfg);
+    let mut orca = match ctrl {
+        Controller::GreedyOrca => Some(GreedyOrcaFleet::new(&env)?),
+        _ => None,
+    };
+    let mut vels = Vec::with_capacity(n);
+    let mut shielded = Vec::new();
     let hidden = actor.as_ref().map(|a| a.hidden()).unwrap_or(0);
     let mut h = vec![0.0f32; n * hidden];
     let masks = vec![1.0f32; n];
@@ -70,11 +88,24 @@ pub fn run_episode(
                     );
                 }
             }
-            Controller::Learned { sample, .. } => {
+            Controller::GreedyOrca => {
+                env.observe(&mut obs);
+                let orca = orca.as_mut().expect("greedy-orca controller has its fleet");
+                orca.act(&obs, &mut vels)?;
+                env.step_velocities(&vels)?;
+                continue;
+            }
+            Controller::Learned { sample, .. } | Controller::Shielded { sample, .. } => {
                 env.observe(&mut obs);
                 let actor = actor.as_mut().expect("learned controller has an actor");
                 let k = actor.arch.n_actions;
-                let logits = actor.forward_step(&obs, &mut h, &masks)?;
+                let mut logits = actor.forward_step(&obs, &mut h, &masks)?;
+                if matches!(ctrl, Controller::Shielded { .. }) {
+                    shielded.clear();
+                    shielded.extend_from_slice(logits);
+                    shield_logits(&obs, &mut shielded, &shield);
+                    logits = &shielded;
+                }
                 for (r, a) in actions.iter_mut().enumerate() {
                     let lg = &logits[r * k..(r + 1) * k];
                     *a = if *sample {
