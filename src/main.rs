@@ -9,6 +9,7 @@ mod plot;
 mod plot_cmd;
 mod plot_font;
 mod render;
+mod report;
 mod sim_cmd;
 mod stats;
 mod train_cmd;

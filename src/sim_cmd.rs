@@ -1,11 +1,12 @@
 //! `tending sim`: episodes with a scripted policy, a metrics table, an optional animation.
 
-use crate::stats::{fmt_ms, markdown_table};
+use crate::report::{self, Numbers};
+use crate::stats::markdown_table;
 use anyhow::{bail, Context, Result};
 use clap::Args;
 use rand::SeedableRng;
 use rayon::prelude::*;
-use sim::baselines::{greedy_action, random_action, GreedyParams};
+use sim::baselines::{greedy_action, random_action, GreedyOrcaFleet, GreedyParams};
 use sim::{episode_seed, Env, Metrics, ScenarioConfig, Setup};
 use std::path::PathBuf;
 
@@ -14,7 +15,7 @@ pub struct SimArgs {
     /// Setup N.M_K (robots.machines_storages), e.g. 14.10_4.
     #[arg(long, default_value = "6.4_2")]
     pub setup: String,
-    /// greedy | random
+    /// greedy | greedy-orca | random
     #[arg(long, default_value = "greedy")]
     pub policy: String,
     #[arg(long, default_value_t = 20)]
@@ -33,6 +34,8 @@ pub struct SimArgs {
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum Scripted {
     Greedy,
+    /// Greedy allocation + ORCA avoidance, continuous velocity commands.
+    GreedyOrca,
     Random,
 }
 
@@ -41,8 +44,9 @@ impl std::str::FromStr for Scripted {
     fn from_str(s: &str) -> Result<Self> {
         match s {
             "greedy" => Ok(Self::Greedy),
+            "greedy-orca" => Ok(Self::GreedyOrca),
             "random" => Ok(Self::Random),
-            other => bail!("unknown --policy `{other}`: expected greedy or random"),
+            other => bail!("unknown --policy `{other}`: expected greedy, greedy-orca or random"),
         }
     }
 }
@@ -71,6 +75,8 @@ pub fn run_episode(
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed ^ 0xA5A5);
     let mut obs = obs::ObsBatch::default();
     let mut actions = Vec::new();
+    let mut orca = GreedyOrcaFleet::new(&env)?;
+    let mut vels = Vec::new();
     on_step(&env);
     while !env.is_done() {
         actions.clear();
@@ -90,6 +96,13 @@ pub fn run_episode(
                     )
                 }));
             }
+            Scripted::GreedyOrca => {
+                env.observe(&mut obs);
+                orca.act(&obs, &mut vels)?;
+                env.step_velocities(&vels)?;
+                on_step(&env);
+                continue;
+            }
         }
         env.step_actions(&actions)?;
         on_step(&env);
@@ -97,28 +110,13 @@ pub fn run_episode(
     Ok(*env.metrics())
 }
 
-pub fn metrics_rows(label: &str, setup: &str, ms: &[Metrics]) -> Vec<String> {
-    let col = |f: &dyn Fn(&Metrics) -> f64| ms.iter().map(f).collect::<Vec<_>>();
-    vec![
-        label.to_string(),
-        setup.to_string(),
-        ms.len().to_string(),
-        fmt_ms(&col(&|m| m.parts_delivered as f64), 1),
-        fmt_ms(&col(&|m| m.collisions as f64), 1),
-        fmt_ms(&col(&|m| m.utilization()), 2),
-        fmt_ms(&col(&|m| m.total_reward), 1),
-    ]
+/// The table row of one policy on one setup: mean (std) over episodes.
+pub fn metrics_row(label: &str, setup: Setup, ms: &[Metrics]) -> Vec<String> {
+    let eps: Vec<Numbers> = ms.iter().map(|m| Numbers::of(m, setup.robots)).collect();
+    let mut row = vec![label.to_string(), setup.to_string(), ms.len().to_string()];
+    row.extend(report::cells(&eps));
+    row
 }
-
-pub const METRICS_HEADER: [&str; 7] = [
-    "policy",
-    "setup",
-    "episodes",
-    "parts delivered",
-    "collisions",
-    "MU",
-    "team reward",
-];
 
 pub fn run(a: SimArgs) -> Result<()> {
     let cfg = load_config(&a.config)?;
@@ -150,10 +148,9 @@ pub fn run(a: SimArgs) -> Result<()> {
             )
         })
         .collect::<Result<_>>()?;
-    let table = markdown_table(
-        &METRICS_HEADER,
-        &[metrics_rows(&a.policy, &setup.to_string(), &ms)],
-    );
+    let mut header = vec!["policy", "setup", "episodes"];
+    header.extend(report::COLUMNS);
+    let table = markdown_table(&header, &[metrics_row(&a.policy, setup, &ms)]);
     println!("{table}");
     eprintln!(
         "{} episodes in {:.2} s (seed {}, k_speed {} m/s, {} steps)",

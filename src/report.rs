@@ -1,0 +1,223 @@
+//! The numbers `tending sim` and `tending eval` report, one definition for both: parts,
+//! contacts by kind (robot-robot, robot-machine, robot-storage, robot-wall), contacts per
+//! robot-step, MU and team reward; the Markdown columns and the typed CSV record.
+
+use crate::stats::fmt_ms;
+use serde::Serialize;
+use sim::Metrics;
+
+/// One run's (or one mean's) numbers. Contacts follow `sim::Metrics`: per robot per step,
+/// a robot touching k bodies adds k, so a robot-robot contact adds 2.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct Numbers {
+    pub parts_delivered: f64,
+    pub collisions: f64,
+    pub collisions_robot_robot: f64,
+    pub collisions_robot_machine: f64,
+    pub collisions_robot_storage: f64,
+    pub collisions_robot_wall: f64,
+    /// collisions / (robots x steps): how often a robot touches something.
+    pub contacts_per_robot_step: f64,
+    /// robot-robot collisions / (robots x steps).
+    pub robot_robot_per_robot_step: f64,
+    pub mu: f64,
+    pub team_reward: f64,
+}
+
+impl Numbers {
+    /// One episode's numbers; `robots` is the fleet size (for the per-robot-step rates).
+    pub fn of(m: &Metrics, robots: usize) -> Self {
+        let robot_steps = (robots as f64 * m.steps as f64).max(1.0);
+        Self {
+            parts_delivered: m.parts_delivered as f64,
+            collisions: m.collisions as f64,
+            collisions_robot_robot: m.collisions_robot_robot as f64,
+            collisions_robot_machine: m.collisions_robot_machine as f64,
+            collisions_robot_storage: m.collisions_robot_storage as f64,
+            collisions_robot_wall: m.collisions_robot_wall as f64,
+            contacts_per_robot_step: m.collisions as f64 / robot_steps,
+            robot_robot_per_robot_step: m.collisions_robot_robot as f64 / robot_steps,
+            mu: m.utilization(),
+            team_reward: m.total_reward,
+        }
+    }
+
+    /// Field-wise mean of several episodes (zeros for none).
+    pub fn mean(xs: &[Numbers]) -> Self {
+        let n = xs.len().max(1) as f64;
+        let mut out = Self::default();
+        for x in xs {
+            for (o, v) in out.fields_mut().into_iter().zip(x.fields()) {
+                *o += v / n;
+            }
+        }
+        out
+    }
+
+    fn fields(&self) -> [f64; 10] {
+        [
+            self.parts_delivered,
+            self.collisions,
+            self.collisions_robot_robot,
+            self.collisions_robot_machine,
+            self.collisions_robot_storage,
+            self.collisions_robot_wall,
+            self.contacts_per_robot_step,
+            self.robot_robot_per_robot_step,
+            self.mu,
+            self.team_reward,
+        ]
+    }
+
+    fn fields_mut(&mut self) -> [&mut f64; 10] {
+        [
+            &mut self.parts_delivered,
+            &mut self.collisions,
+            &mut self.collisions_robot_robot,
+            &mut self.collisions_robot_machine,
+            &mut self.collisions_robot_storage,
+            &mut self.collisions_robot_wall,
+            &mut self.contacts_per_robot_step,
+            &mut self.robot_robot_per_robot_step,
+            &mut self.mu,
+            &mut self.team_reward,
+        ]
+    }
+}
+
+/// Markdown column names matching [`cells`].
+pub const COLUMNS: [&str; 10] = [
+    "parts delivered",
+    "contacts",
+    "robot-robot",
+    "robot-machine",
+    "robot-storage",
+    "robot-wall",
+    "contacts / robot-step",
+    "robot-robot / robot-step",
+    "MU",
+    "team reward",
+];
+
+/// "mean (std)" cells over `xs` (episodes, or per-seed means), in [`COLUMNS`] order.
+pub fn cells(xs: &[Numbers]) -> Vec<String> {
+    let col = |f: &dyn Fn(&Numbers) -> f64| xs.iter().map(f).collect::<Vec<_>>();
+    vec![
+        fmt_ms(&col(&|n| n.parts_delivered), 1),
+        fmt_ms(&col(&|n| n.collisions), 1),
+        fmt_ms(&col(&|n| n.collisions_robot_robot), 1),
+        fmt_ms(&col(&|n| n.collisions_robot_machine), 1),
+        fmt_ms(&col(&|n| n.collisions_robot_storage), 1),
+        fmt_ms(&col(&|n| n.collisions_robot_wall), 1),
+        fmt_ms(&col(&|n| n.contacts_per_robot_step), 4),
+        fmt_ms(&col(&|n| n.robot_robot_per_robot_step), 4),
+        fmt_ms(&col(&|n| n.mu), 2),
+        fmt_ms(&col(&|n| n.team_reward), 1),
+    ]
+}
+
+/// One row of `tending eval`'s results.csv: the mean over the episodes of one seed. Column
+/// names are what `tending plot` and bench/experiments read. (Flat fields: the csv crate
+/// cannot serialize a flattened struct.)
+#[derive(Debug, Clone, Serialize)]
+pub struct CsvRow {
+    pub policy: String,
+    pub setup: String,
+    pub seed: u64,
+    pub episodes: u64,
+    pub parts_delivered: f64,
+    pub collisions: f64,
+    pub collisions_robot_robot: f64,
+    pub collisions_robot_machine: f64,
+    pub collisions_robot_storage: f64,
+    pub collisions_robot_wall: f64,
+    pub contacts_per_robot_step: f64,
+    pub robot_robot_per_robot_step: f64,
+    pub mu: f64,
+    pub team_reward: f64,
+}
+
+impl CsvRow {
+    pub fn new(policy: &str, setup: &str, seed: u64, episodes: u64, n: &Numbers) -> Self {
+        Self {
+            policy: policy.to_string(),
+            setup: setup.to_string(),
+            seed,
+            episodes,
+            parts_delivered: n.parts_delivered,
+            collisions: n.collisions,
+            collisions_robot_robot: n.collisions_robot_robot,
+            collisions_robot_machine: n.collisions_robot_machine,
+            collisions_robot_storage: n.collisions_robot_storage,
+            collisions_robot_wall: n.collisions_robot_wall,
+            contacts_per_robot_step: n.contacts_per_robot_step,
+            robot_robot_per_robot_step: n.robot_robot_per_robot_step,
+            mu: n.mu,
+            team_reward: n.team_reward,
+        }
+    }
+}
+
+/// The CSV text of `rows` (header from the field names).
+pub fn csv_text(rows: &[CsvRow]) -> anyhow::Result<String> {
+    let mut w = csv::Writer::from_writer(vec![]);
+    for r in rows {
+        w.serialize(r)?;
+    }
+    Ok(String::from_utf8(w.into_inner()?)?)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn metrics() -> Metrics {
+        Metrics {
+            parts_delivered: 3,
+            parts_collected: 4,
+            collisions: 10,
+            collisions_robot_robot: 4,
+            collisions_robot_machine: 3,
+            collisions_robot_storage: 2,
+            collisions_robot_wall: 1,
+            p_max: 8,
+            total_reward: 1.5,
+            steps: 200,
+        }
+    }
+
+    #[test]
+    fn rates_are_per_robot_step() {
+        let n = Numbers::of(&metrics(), 5);
+        assert_eq!(n.contacts_per_robot_step, 10.0 / 1000.0);
+        assert_eq!(n.robot_robot_per_robot_step, 4.0 / 1000.0);
+        assert_eq!(n.mu, 0.5);
+        let kinds = n.collisions_robot_robot
+            + n.collisions_robot_machine
+            + n.collisions_robot_storage
+            + n.collisions_robot_wall;
+        assert_eq!(kinds, n.collisions);
+    }
+
+    #[test]
+    fn mean_and_csv_columns() {
+        let a = Numbers::of(&metrics(), 5);
+        let mut m2 = metrics();
+        m2.parts_delivered = 5;
+        let b = Numbers::of(&m2, 5);
+        assert_eq!(Numbers::mean(&[a, b]).parts_delivered, 4.0);
+        assert_eq!(Numbers::mean(&[]), Numbers::default());
+        let text = csv_text(&[CsvRow::new("greedy", "6.4_2", 1, 2, &a)]).unwrap();
+        let header = text.lines().next().unwrap();
+        assert!(header.starts_with("policy,setup,seed,episodes,parts_delivered,collisions,"));
+        for c in [
+            "collisions_robot_robot",
+            "collisions_robot_wall",
+            "mu",
+            "team_reward",
+        ] {
+            assert!(header.split(',').any(|h| h == c), "{header}");
+        }
+        assert_eq!(text.lines().count(), 2);
+    }
+}
