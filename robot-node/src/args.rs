@@ -32,8 +32,14 @@ pub struct Params {
     pub domain_id: u16,
     /// Checkpoint of the learned policy; `None` = scripted greedy controller.
     pub policy: Option<PathBuf>,
-    /// `greedy` or `policy`; default: `policy` if a policy path is given, else `greedy`.
+    /// `greedy`, `greedy-orca` or `policy`; default: `policy` if a policy path is given,
+    /// else `greedy`.
     pub controller: ControllerKind,
+    /// Put the policy's actions behind the one-step action shield (obs::shield).
+    pub shield: bool,
+    /// Pick/place reach beyond the robot radius (greedy-orca stops within it); default:
+    /// `robot_radius` (the simulator's default reach equals its radius at every scale).
+    pub reach: Option<f64>,
     pub control_rate_hz: f64,
     pub use_sim_time: bool,
     /// Speed of one discrete action, m/s.
@@ -83,6 +89,7 @@ pub struct Params {
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum ControllerKind {
     Greedy,
+    GreedyOrca,
     Policy,
 }
 
@@ -94,6 +101,8 @@ impl Default for Params {
             domain_id: 0,
             policy: None,
             controller: ControllerKind::Greedy,
+            shield: false,
+            reach: None,
             control_rate_hz: 10.0,
             use_sim_time: false,
             k_speed: 0.5,
@@ -133,7 +142,8 @@ impl Params {
 
 pub const USAGE: &str = "usage: robot_node [--ros-args -r __ns:=/robot_N [-r __node:=NAME] \
 [-p NAME:=VALUE]... [--params-file FILE.yaml]... [--log-level LEVEL]]
-parameters: policy (path), controller (greedy|policy), control_rate_hz (10), use_sim_time (false),
+parameters: policy (path), controller (greedy|greedy-orca|policy), shield (false), control_rate_hz (10),
+            use_sim_time (false), reach (= robot_radius),
             k_speed (0.5), stale_timeout_s (1.0), static_stale_timeout_s (= stale_timeout_s, <=0 off),
             room_margin (0.25), stats_period_s (10), discovery_period_s (0.5),
             robot_radius (0.08), machine_half_x/_y (0.12), storage_half_x (0.15), storage_half_y (0.08),
@@ -203,15 +213,26 @@ fn apply_param(p: &mut Params, name: &str, v: &ParamValue) -> Result<Applied, Ar
         "controller" => {
             p.controller = match v {
                 ParamValue::Str(s) if s == "greedy" => ControllerKind::Greedy,
+                ParamValue::Str(s) if s == "greedy-orca" => ControllerKind::GreedyOrca,
                 ParamValue::Str(s) if s == "policy" => ControllerKind::Policy,
                 other => {
                     return Err(ArgError::Param {
                         name: name.into(),
-                        msg: format!("expected `greedy` or `policy`, got {other:?}"),
+                        msg: format!("expected `greedy`, `greedy-orca` or `policy`, got {other:?}"),
                     })
                 }
             }
         }
+        "shield" => match v {
+            ParamValue::Bool(b) => p.shield = *b,
+            other => {
+                return Err(ArgError::Param {
+                    name: name.into(),
+                    msg: format!("expected true or false, got {other:?}"),
+                })
+            }
+        },
+        "reach" => p.reach = Some(positive(name, v)?),
         "control_rate_hz" => {
             let hz = positive(name, v)?;
             if hz > 1000.0 {

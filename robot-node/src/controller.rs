@@ -2,9 +2,16 @@
 //!
 //! - [`PolicyController`]: the learned SMAPPO/MAPPO policy (crate `policy`, inference only:
 //!   no simulator, no trainer), GRU state kept per robot, greedy argmax;
-//! - [`GreedyController`]: the scripted baseline, the same function as the simulator's.
+//! - [`GreedyController`]: the scripted baseline, the same function as the simulator's;
+//! - [`GreedyOrcaController`]: greedy allocation + ORCA avoidance ([`obs::orca`], the same
+//!   code as the simulator's `greedy-orca`), a continuous velocity.
+//!
+//! The policy can run behind the action shield ([`obs::shield`], the same code as
+//! `tending eval --shield`).
 
 use obs::greedy::GreedyParams;
+use obs::orca::{GreedyOrca, OrcaParams};
+use obs::shield::ShieldParams;
 use obs::ObsBatch;
 
 /// The paper's discrete actions (section III): holonomic velocity K_speed on one axis.
@@ -94,6 +101,44 @@ impl Controller for GreedyController {
     }
 }
 
+/// Greedy-ORCA behind [`Controller`]: keeps the previous observation to estimate
+/// velocities, forgets it on [`Controller::reset`].
+#[derive(Debug, Clone)]
+pub struct GreedyOrcaController {
+    inner: GreedyOrca,
+}
+
+impl GreedyOrcaController {
+    pub fn new(params: OrcaParams) -> anyhow::Result<Self> {
+        Ok(Self {
+            inner: GreedyOrca::new(params).map_err(|e| anyhow::anyhow!(e))?,
+        })
+    }
+}
+
+impl Controller for GreedyOrcaController {
+    fn reset(&mut self) {
+        self.inner.reset();
+    }
+    fn act(&mut self, obs: &ObsBatch) -> anyhow::Result<[f32; 2]> {
+        anyhow::ensure!(
+            obs.rows == 1,
+            "greedy-orca controller expects 1 row, got {}",
+            obs.rows
+        );
+        obs.validate()?;
+        Ok(self.inner.velocity(
+            obs.own_row(0),
+            obs.machines_row(0),
+            obs.storages_row(0),
+            obs.peers_row(0),
+        ))
+    }
+    fn name(&self) -> &'static str {
+        "greedy-orca"
+    }
+}
+
 /// The learned policy (SMAPPO or MAPPO actor from a checkpoint) behind [`Controller`]:
 /// keeps the GRU state, acts greedily (argmax) and resets the state on [`Controller::reset`]
 /// (own data stale then back, sim time going backwards).
@@ -101,6 +146,8 @@ pub struct PolicyController {
     policy: policy::Policy,
     state: policy::PolicyState,
     pub k_speed: f32,
+    /// Mask unsafe actions before the argmax (`-p shield:=true`).
+    shield: Option<ShieldParams>,
 }
 
 impl PolicyController {
@@ -117,6 +164,7 @@ impl PolicyController {
                 policy,
                 state,
                 k_speed: meta_k.unwrap_or(default_k_speed),
+                shield: None,
             },
             meta_k.is_some(),
         ))
@@ -128,7 +176,15 @@ impl PolicyController {
             policy,
             state,
             k_speed,
+            shield: None,
         }
+    }
+
+    /// Put the policy behind the action shield (its k_speed is set to the controller's).
+    pub fn with_shield(mut self, mut shield: ShieldParams) -> Self {
+        shield.k_speed = self.k_speed;
+        self.shield = Some(shield);
+        self
     }
 
     pub fn state(&self) -> &policy::PolicyState {
@@ -137,11 +193,54 @@ impl PolicyController {
 
     /// The discrete action for row 0 of `obs` (advances the recurrent state).
     pub fn action(&mut self, obs: &ObsBatch) -> anyhow::Result<Action> {
-        let a = self
-            .policy
-            .act(obs, &mut self.state, policy::ActMode::Greedy)?;
+        let a = match &self.shield {
+            None => self
+                .policy
+                .act(obs, &mut self.state, policy::ActMode::Greedy)?,
+            Some(sp) => {
+                let sp = *sp;
+                let logits = self.policy.logits(obs, &mut self.state)?;
+                let mut l = [0.0f32; 5];
+                anyhow::ensure!(
+                    logits.len() == l.len(),
+                    "policy has {} actions, the shield knows 5",
+                    logits.len()
+                );
+                l.copy_from_slice(logits);
+                let safe = obs::shield::safe_actions(
+                    obs.own_row(0),
+                    obs.machines_row(0),
+                    obs.storages_row(0),
+                    obs.peers_row(0),
+                    &sp,
+                );
+                obs::shield::mask_logits(&mut l, &safe);
+                policy::nn::categorical::argmax(&l) as u8
+            }
+        };
         Action::from_index(a as usize).ok_or_else(|| anyhow::anyhow!("policy gave action {a}"))
     }
+}
+
+/// Greedy-ORCA's knowledge of the fleet: the greedy parameters, the room (the wire
+/// contract's 2.3 m) and the reach.
+pub fn orca_params(p: &crate::args::Params) -> OrcaParams {
+    let g = crate::node::greedy_params(p);
+    let reach = p.reach.unwrap_or(p.robot_radius) as f32;
+    OrcaParams::new(g, 2.0 * msgs::validate::ROOM_HALF_EXTENT as f32, reach)
+}
+
+/// The shield's knowledge of the fleet (k_speed is set from the policy's own).
+pub fn shield_params(p: &crate::args::Params) -> ShieldParams {
+    let g = crate::node::greedy_params(p);
+    ShieldParams::new(
+        g.robot_radius,
+        g.machine_half,
+        g.storage_half,
+        g.k_speed,
+        g.dt,
+        2.0 * msgs::validate::ROOM_HALF_EXTENT as f32,
+    )
 }
 
 /// `k_speed` from a checkpoint's free-form training metadata, if it holds a positive one.
@@ -318,6 +417,56 @@ pub(crate) mod tests {
             "{msg}"
         );
         std::fs::remove_file(&junk).ok();
+    }
+
+    #[test]
+    fn greedy_orca_heads_for_the_machine_and_refuses_bad_batches() {
+        let p = OrcaParams::new(params(0.5), 2.3, 0.08);
+        let mut c = GreedyOrcaController::new(p).unwrap();
+        let o = b(
+            [0.0, 0.0],
+            false,
+            vec![([0.8, 0.0], true)],
+            vec![[-0.8, 0.8]],
+        );
+        let v = c.act(&o).unwrap();
+        assert!(v[0] > 0.4 && v[1].abs() < 0.05, "{v:?}");
+        c.reset();
+        assert!(c.act(&ObsBatch::zeros(2, Default::default())).is_err());
+        let mut bad = p;
+        bad.greedy.dt = f32::NAN;
+        assert!(GreedyOrcaController::new(bad).is_err());
+    }
+
+    #[test]
+    fn shielded_policy_only_takes_safe_actions() {
+        let mut arch = policy::ArchConfig::smappo();
+        arch.d_model = 8;
+        arch.heads = 2;
+        arch.hidden = 8;
+        let sp = ShieldParams::new(0.08, [0.12, 0.12], [0.15, 0.08], 0.5, 0.1, 2.3);
+        // Peers touching-close on all four sides: only "stay" is safe.
+        let peers = [[0.17, 0.0], [-0.17, 0.0], [0.0, 0.17], [0.0, -0.17]];
+        let o = ObsBuilder {
+            own_pos: [0.0, 0.0],
+            has_part: false,
+            machines: vec![([0.8, 0.8], true)],
+            storages: vec![[-0.8, 0.8]],
+            peers: peers.iter().map(|p| (*p, false)).collect(),
+        }
+        .build()
+        .unwrap();
+        let mut unshielded_moves = 0;
+        for seed in 0..8 {
+            let actor = policy::Actor::new(arch, seed);
+            let pol = policy::Policy::from_actor(actor, serde_json::Value::Null);
+            let mut free = PolicyController::from_policy(pol.clone(), 0.5);
+            unshielded_moves += (free.action(&o).unwrap() != Action::Stay) as usize;
+            let mut c = PolicyController::from_policy(pol, 0.5).with_shield(sp);
+            assert_eq!(c.action(&o).unwrap(), Action::Stay, "seed {seed}");
+        }
+        // The check means something only if unshielded actors would have moved.
+        assert!(unshielded_moves > 0);
     }
 
     #[test]

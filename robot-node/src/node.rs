@@ -25,7 +25,7 @@ use msgs::topics::{self, Leaf};
 use msgs::{Bool, Clock, EntityTopic, PoseStamped, Profile, RosMessage, Twist};
 
 use crate::args::{ControllerKind, Params};
-use crate::controller::{Controller, GreedyController, PolicyController};
+use crate::controller::{Controller, GreedyController, GreedyOrcaController, PolicyController};
 use crate::fanout::{self, Incoming};
 use crate::tick::{Brain, Outcome, TickResult};
 use crate::watchdog::{Stage, Watchdog};
@@ -44,11 +44,18 @@ pub fn make_controller(p: &Params) -> anyhow::Result<(Box<dyn Controller>, f64)>
             let gp = greedy_params(p);
             Ok((Box::new(GreedyController::new(gp)), p.k_speed))
         }
+        ControllerKind::GreedyOrca => {
+            let c = GreedyOrcaController::new(crate::controller::orca_params(p))?;
+            Ok((Box::new(c), p.k_speed))
+        }
         ControllerKind::Policy => {
             let path = p.policy.as_ref().ok_or_else(|| {
                 anyhow!("controller `policy` needs a checkpoint: -p policy:=PATH")
             })?;
-            let (c, from_meta) = PolicyController::load(path, p.k_speed as f32)?;
+            let (mut c, from_meta) = PolicyController::load(path, p.k_speed as f32)?;
+            if p.shield {
+                c = c.with_shield(crate::controller::shield_params(p));
+            }
             let k = c.k_speed as f64;
             info!(
                 "policy {} loaded ({}), k_speed {k} m/s from {}",
