@@ -268,6 +268,27 @@ impl Actor {
         adv: &[f32],
         cfg: PpoActorConfig,
     ) -> Result<ActorLossStats, PolicyError> {
+        self.ppo_grads_part(obs, t, b, h0, masks, actions, old_logp, adv, cfg, t * b)
+    }
+
+    /// [`ppo_grads`](Self::ppo_grads) for one part of a mini-batch of `total_rows` rows:
+    /// losses, statistics and gradients are this part's share of the mean over all rows,
+    /// so calling it on every part (gradients accumulate) gives the mini-batch's gradient
+    /// with only one part's activations held at a time.
+    #[allow(clippy::too_many_arguments)]
+    pub fn ppo_grads_part(
+        &mut self,
+        obs: &ObsBatch,
+        t: usize,
+        b: usize,
+        h0: &[f32],
+        masks: &[f32],
+        actions: &[u8],
+        old_logp: &[f32],
+        adv: &[f32],
+        cfg: PpoActorConfig,
+        total_rows: usize,
+    ) -> Result<ActorLossStats, PolicyError> {
         let n = t * b;
         check_len("actions", actions.len(), n)?;
         check_len("old_logp", old_logp.len(), n)?;
@@ -285,7 +306,7 @@ impl Actor {
         let logp = sized(&mut c.logp, n * k);
         let dl = sized(&mut c.dlogits, n * k);
         let mut st = ActorLossStats::default();
-        let inv = 1.0 / n as f32;
+        let inv = 1.0 / total_rows.max(1) as f32;
         for r in 0..n {
             let lp = &mut logp[r * k..(r + 1) * k];
             categorical::log_softmax(&c.head.y[r * k..(r + 1) * k], lp);

@@ -382,13 +382,33 @@ impl Critic {
         returns: &[f32],
         cfg: ValueLossConfig,
     ) -> Result<ValueLossStats, PolicyError> {
+        self.value_grads_part(obs, t, b, n, h0, masks, old_values, returns, cfg, t * b)
+    }
+
+    /// [`value_grads`](Self::value_grads) for one part of a mini-batch of `total_rows`
+    /// rows (whole environments per part): loss, statistics and gradients are this part's
+    /// share of the mean over all rows.
+    #[allow(clippy::too_many_arguments)]
+    pub fn value_grads_part(
+        &mut self,
+        obs: &ObsBatch,
+        t: usize,
+        b: usize,
+        n: usize,
+        h0: &[f32],
+        masks: &[f32],
+        old_values: &[f32],
+        returns: &[f32],
+        cfg: ValueLossConfig,
+        total_rows: usize,
+    ) -> Result<ValueLossStats, PolicyError> {
         let rows = t * b;
         check_len("old_values", old_values.len(), rows)?;
         check_len("returns", returns.len(), rows)?;
         self.forward_seq(obs, t, b, n, h0, masks)?;
         let c = &mut self.cache;
         let dv = sized(&mut c.dv, rows);
-        let inv = 1.0 / rows as f32;
+        let inv = 1.0 / total_rows.max(1) as f32;
         let mut st = ValueLossStats::default();
         for r in 0..rows {
             let v = c.head.y[r];
