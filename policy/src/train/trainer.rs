@@ -182,6 +182,10 @@ pub struct Trainer {
     /// [`Trainer::setup_for_update`]); `schedule` then holds one stage whose setup is the
     /// range's largest (`hi`), which sizes the MAPPO critic, and the episode budget.
     pub randomize: Option<SetupRange>,
+    /// Most rows of a mini-batch that go through the networks at once (see
+    /// `Trainer::ppo`); a memory bound, not a hyper-parameter: splitting changes results
+    /// only by summation order.
+    pub part_rows: usize,
     buf: Rollout,
     mb: MiniBatch,
 }
@@ -194,6 +198,98 @@ fn mix(seed: u64, update: u64, stream: u64) -> u64 {
     z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
     z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
     z ^ (z >> 31)
+}
+
+/// Default [`Trainer::part_rows`].
+const PART_ROWS: usize = 16_384;
+
+/// Activation memory one mini-batch part may take (actor + critic), which caps the part's
+/// rows where a row is large (the MAPPO critic's input grows with robots squared). A
+/// constant, not the machine's free memory, so results never depend on the machine.
+const PART_BYTES: usize = 1 << 30;
+
+/// Bytes of training state per row, measured in floats from the caches the networks keep
+/// for backward (attention per group: ~1,600 floats plus 4 per entity; encoder, GRU head
+/// ~2,100), for actor plus critic. Calibrated against the peak RSS of `train_bench
+/// 100.16_2 8 1 1` (1.16 GB measured, 1.2 GB estimated).
+fn part_row_bytes(kind: ModelKind, setup: Setup, cfg: &TrainConfig) -> usize {
+    let ents = setup.machines + setup.storages + setup.robots.saturating_sub(1);
+    let floats = match kind {
+        ModelKind::Smappo => 2 * (7_000 + 12 * ents),
+        ModelKind::Mappo => {
+            let fd = obs::SELF_DIM
+                + cfg.mappo_max_machines * obs::MACHINE_DIM
+                + cfg.mappo_max_storages * obs::STORAGE_DIM
+                + cfg.mappo_max_robots.saturating_sub(1) * obs::PEER_DIM;
+            // actor: input, its LayerNorm output and their gradients; critic: the same
+            // over [own ++ every robot's flat obs], plus both heads
+            4 * fd + 4 * fd * (1 + setup.robots) + 4_000
+        }
+    };
+    4 * floats
+}
+
+/// Obs floats per row of `setup`.
+fn obs_floats(setup: Setup) -> usize {
+    obs::SELF_DIM
+        + setup.machines * obs::MACHINE_DIM
+        + setup.storages * obs::STORAGE_DIM
+        + setup.robots.saturating_sub(1) * obs::PEER_DIM
+}
+
+/// Rows of one mini-batch part for `setup`: `part_rows`, lowered so a part's activations
+/// stay within [`PART_BYTES`].
+fn part_rows_for(kind: ModelKind, setup: Setup, cfg: &TrainConfig, part_rows: usize) -> usize {
+    part_rows.min(PART_BYTES / part_row_bytes(kind, setup, cfg).max(1))
+}
+
+/// Estimated peak memory of training `setup` (bytes): the rollout (observations and
+/// per-row scalars of `n_envs` x robots x steps rows), one mini-batch part's activations
+/// and its gathered copies, and the row index of a whole mini-batch.
+pub fn estimate_train_bytes(
+    kind: ModelKind,
+    setup: Setup,
+    cfg: &TrainConfig,
+    episode_steps: usize,
+    part_rows: usize,
+) -> usize {
+    let rows = cfg.n_envs * setup.robots * episode_steps;
+    let of = obs_floats(setup);
+    let rollout = rows * 4 * (of + 10) + rows * 4 * 2 * 64 / cfg.data_chunk_length.max(1);
+    let chunk = setup.robots * cfg.data_chunk_length;
+    let part = part_rows_for(kind, setup, cfg, part_rows).max(chunk);
+    let mb_rows = rows.div_ceil(cfg.num_mini_batch.max(1));
+    let part = part.min(mb_rows);
+    rollout + part * (part_row_bytes(kind, setup, cfg) + 3 * 4 * of) + mb_rows * 8
+}
+
+/// MemAvailable of /proc/meminfo in bytes (None where there is none).
+fn mem_available() -> Option<usize> {
+    let s = std::fs::read_to_string("/proc/meminfo").ok()?;
+    let line = s.lines().find(|l| l.starts_with("MemAvailable:"))?;
+    let kb: usize = line.split_whitespace().nth(1)?.parse().ok()?;
+    Some(kb * 1024)
+}
+
+/// Rollout rows of chunk units `units` in mini-batch order: `t * B' + k * n + i` <- source
+/// `(c * l + t) * b + env * n + i`.
+fn chunk_rows(
+    units: &[usize],
+    n: usize,
+    n_chunks: usize,
+    l: usize,
+    b: usize,
+    rows: &mut Vec<usize>,
+) {
+    rows.clear();
+    for t in 0..l {
+        for &u in units {
+            let (env, c) = (u / n_chunks, u % n_chunks);
+            for i in 0..n {
+                rows.push((c * l + t) * b + env * n + i);
+            }
+        }
+    }
 }
 
 /// Copy rows `rows` of `src` (in order) into `dst`.
@@ -244,6 +340,24 @@ impl Trainer {
             )));
         }
         let (actor_arch, critic_arch) = Self::archs(kind, &cfg, &schedule)?;
+        // refuse up front what the machine cannot hold, instead of being OOM-killed
+        if let Some(avail) = mem_available() {
+            for st in &schedule {
+                let need = estimate_train_bytes(kind, st.setup, &cfg, steps, PART_ROWS);
+                if need > avail {
+                    return Err(TrainError::Config(format!(
+                        "training {kind} on {} with {} envs needs about {:.1} GB (rollout of \
+                         {} rows plus one mini-batch part), this machine has {:.1} GB \
+                         available: use fewer envs (n_envs) or more mini-batches",
+                        st.setup,
+                        cfg.n_envs,
+                        need as f64 / 1e9,
+                        cfg.n_envs * st.setup.robots * steps,
+                        avail as f64 / 1e9
+                    )));
+                }
+            }
+        }
         let mut actor = Actor::new(actor_arch, mix(seed, u64::MAX, 10));
         let mut critic = Critic::new(critic_arch, mix(seed, u64::MAX, 11));
         actor.opt.cfg.lr = cfg.lr;
@@ -265,6 +379,7 @@ impl Trainer {
             stage: 0,
             stage_episodes: 0,
             randomize: None,
+            part_rows: PART_ROWS,
             buf: Rollout::default(),
             mb: MiniBatch::default(),
         })
@@ -398,7 +513,7 @@ impl Trainer {
         })?;
         let rollout_secs = t0.elapsed().as_secs_f64();
         let t1 = Instant::now();
-        let mut st = self.ppo(setup.robots)?;
+        let mut st = self.ppo(setup)?;
         st.train_secs = t1.elapsed().as_secs_f64();
         st.rollout_secs = rollout_secs;
 
@@ -558,7 +673,8 @@ impl Trainer {
         Ok(finished)
     }
 
-    fn ppo(&mut self, n: usize) -> Result<UpdateStats, TrainError> {
+    fn ppo(&mut self, setup: Setup) -> Result<UpdateStats, TrainError> {
+        let n = setup.robots;
         let cfg = self.cfg.clone();
         let e = cfg.n_envs;
         let b = e * n;
@@ -582,79 +698,87 @@ impl Trainer {
         let mut st = UpdateStats::default();
         let mut count = 0f32;
         let mut rows = vec![];
+        let part_rows = part_rows_for(self.kind, setup, &cfg, self.part_rows);
         for _ in 0..cfg.ppo_epoch {
             perm.shuffle(&mut rng);
             for mb_units in perm.chunks(per_mb) {
-                let bu = mb_units.len() * n;
-                // rows t * bu + k * n + i  <-  source (c * l + t) * b + env * n + i
-                rows.clear();
-                for t in 0..l {
-                    for &u in mb_units {
-                        let (env, c) = (u / n_chunks, u % n_chunks);
-                        for i in 0..n {
-                            rows.push((c * l + t) * b + env * n + i);
-                        }
-                    }
-                }
-                let buf = &self.buf;
-                let mb = &mut self.mb;
-                gather_rows(&buf.obs, &rows, &mut mb.obs);
-                mb.masks.clear();
-                mb.masks.extend(rows.iter().map(|&r| buf.masks[r]));
-                mb.actions.clear();
-                mb.actions.extend(rows.iter().map(|&r| buf.actions[r]));
-                mb.logp.clear();
-                mb.logp.extend(rows.iter().map(|&r| buf.logp[r]));
-                mb.adv.clear();
-                mb.adv.extend(rows.iter().map(|&r| buf.adv[r]));
-                mb.values.clear();
-                mb.values.extend(rows.iter().map(|&r| buf.values[r]));
-                mb.ret.clear();
-                mb.ret.extend(rows.iter().map(|&r| buf.ret[r]));
-                mb.ha.clear();
-                mb.hc.clear();
-                for &u in mb_units {
-                    let (env, c) = (u / n_chunks, u % n_chunks);
-                    let r0 = c * b + env * n;
-                    mb.ha
-                        .extend_from_slice(&buf.ha[r0 * ha_dim..(r0 + n) * ha_dim]);
-                    mb.hc
-                        .extend_from_slice(&buf.hc[r0 * hc_dim..(r0 + n) * hc_dim]);
-                }
+                let mb_rows = mb_units.len() * n * l;
+                // ValueNorm sees the whole mini-batch's returns first, as before splitting
                 if cfg.use_valuenorm {
-                    self.vnorm.update(&mb.ret);
-                    let vn = &self.vnorm;
-                    mb.ret.iter_mut().for_each(|r| *r = vn.normalize(*r));
+                    chunk_rows(mb_units, n, n_chunks, l, b, &mut rows);
+                    let buf = &self.buf;
+                    self.mb.ret.clear();
+                    self.mb.ret.extend(rows.iter().map(|&r| buf.ret[r]));
+                    self.vnorm.update(&self.mb.ret);
                 }
-                let (actor, critic, mb) = (&mut self.actor, &mut self.critic, &self.mb);
-                let (ra, rc) = rayon::join(
-                    || {
-                        actor.ppo_grads(
-                            &mb.obs,
-                            l,
-                            bu,
-                            &mb.ha,
-                            &mb.masks,
-                            &mb.actions,
-                            &mb.logp,
-                            &mb.adv,
-                            pcfg,
-                        )
-                    },
-                    || {
-                        critic.value_grads(
-                            &mb.obs, l, bu, n, &mb.hc, &mb.masks, &mb.values, &mb.ret, vcfg,
-                        )
-                    },
-                );
-                let (sa, sc) = (ra?, rc?);
-                st.actor_grad_norm += actor.step(cfg.max_grad_norm);
-                st.critic_grad_norm += critic.step(cfg.max_grad_norm);
-                st.policy_loss += sa.policy_loss;
-                st.entropy += sa.entropy;
-                st.approx_kl += sa.approx_kl;
-                st.clip_frac += sa.clip_frac;
-                st.value_loss += sc.value_loss;
+                // Parts of at most PART_ROWS rows (whole chunks, so whole envs) go through
+                // the networks one after the other, gradients accumulating: activation
+                // memory is bounded by one part, not by the mini-batch (100 robots x 8 envs
+                // is 160,000 rows). One part (every bundled config) is the unsplit step.
+                for part in mb_units.chunks((part_rows / (n * l)).max(1)) {
+                    let bu = part.len() * n;
+                    chunk_rows(part, n, n_chunks, l, b, &mut rows);
+                    let buf = &self.buf;
+                    let mb = &mut self.mb;
+                    gather_rows(&buf.obs, &rows, &mut mb.obs);
+                    mb.masks.clear();
+                    mb.masks.extend(rows.iter().map(|&r| buf.masks[r]));
+                    mb.actions.clear();
+                    mb.actions.extend(rows.iter().map(|&r| buf.actions[r]));
+                    mb.logp.clear();
+                    mb.logp.extend(rows.iter().map(|&r| buf.logp[r]));
+                    mb.adv.clear();
+                    mb.adv.extend(rows.iter().map(|&r| buf.adv[r]));
+                    mb.values.clear();
+                    mb.values.extend(rows.iter().map(|&r| buf.values[r]));
+                    mb.ret.clear();
+                    mb.ret.extend(rows.iter().map(|&r| buf.ret[r]));
+                    mb.ha.clear();
+                    mb.hc.clear();
+                    for &u in part {
+                        let (env, c) = (u / n_chunks, u % n_chunks);
+                        let r0 = c * b + env * n;
+                        mb.ha
+                            .extend_from_slice(&buf.ha[r0 * ha_dim..(r0 + n) * ha_dim]);
+                        mb.hc
+                            .extend_from_slice(&buf.hc[r0 * hc_dim..(r0 + n) * hc_dim]);
+                    }
+                    if cfg.use_valuenorm {
+                        let vn = &self.vnorm;
+                        mb.ret.iter_mut().for_each(|r| *r = vn.normalize(*r));
+                    }
+                    let (actor, critic, mb) = (&mut self.actor, &mut self.critic, &self.mb);
+                    let (ra, rc) = rayon::join(
+                        || {
+                            actor.ppo_grads_part(
+                                &mb.obs,
+                                l,
+                                bu,
+                                &mb.ha,
+                                &mb.masks,
+                                &mb.actions,
+                                &mb.logp,
+                                &mb.adv,
+                                pcfg,
+                                mb_rows,
+                            )
+                        },
+                        || {
+                            critic.value_grads_part(
+                                &mb.obs, l, bu, n, &mb.hc, &mb.masks, &mb.values, &mb.ret, vcfg,
+                                mb_rows,
+                            )
+                        },
+                    );
+                    let (sa, sc) = (ra?, rc?);
+                    st.policy_loss += sa.policy_loss;
+                    st.entropy += sa.entropy;
+                    st.approx_kl += sa.approx_kl;
+                    st.clip_frac += sa.clip_frac;
+                    st.value_loss += sc.value_loss;
+                }
+                st.actor_grad_norm += self.actor.step(cfg.max_grad_norm);
+                st.critic_grad_norm += self.critic.step(cfg.max_grad_norm);
                 count += 1.0;
             }
         }
