@@ -259,6 +259,15 @@ impl Plan {
         })
     }
 
+    /// The ROS 2 environment of a child: the fleet's domain, and the distribution a
+    /// sourced ROS 2 install would set (ros2-client warns in every process without it).
+    fn ros_env(&self, c: &mut Command) {
+        c.env("ROS_DOMAIN_ID", self.domain.to_string());
+        if std::env::var_os("ROS_DISTRO").is_none() {
+            c.env("ROS_DISTRO", "jazzy");
+        }
+    }
+
     /// A child's log file; a restarted child appends (its watchdog's message stays).
     fn log(&self, label: &str, append: bool) -> Result<std::fs::File> {
         let p = self.log_dir.join(format!("{label}.log"));
@@ -276,7 +285,7 @@ impl Plan {
         let f = |x: f32| format!("{:?}", x as f64);
         let label = layout::label(robots);
         let mut c = Command::new(&self.node_bin);
-        c.env("ROS_DOMAIN_ID", self.domain.to_string());
+        self.ros_env(&mut c);
         match robots {
             [one] => c.args(["--ros-args", "-r", &format!("__ns:=/{one}")]),
             many => c.args(["--ros-args", "-p", &format!("robots:={}", many.join(","))]),
@@ -321,8 +330,8 @@ impl Plan {
     fn spawn_bridge(&self, restart: bool, metrics: Sender<String>) -> Result<BridgeProc> {
         let a = &self.a;
         let mut b = Command::new(&self.bridge_bin);
-        b.env("ROS_DOMAIN_ID", self.domain.to_string())
-            .args(["--ros-args", "-p", &format!("setup:={}", self.setup)])
+        self.ros_env(&mut b);
+        b.args(["--ros-args", "-p", &format!("setup:={}", self.setup)])
             .args(["-p", &format!("seed:={}", a.seed)])
             .args(["-p", &format!("mode:={}", a.mode)])
             .args(["-p", &format!("rate_hz:={}", a.rate_hz)])
