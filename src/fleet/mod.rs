@@ -45,8 +45,10 @@ pub struct FleetArgs {
     /// Run time in seconds: wall time in realtime mode, sim time in lockstep mode.
     #[arg(long, default_value_t = 60.0)]
     pub duration: f64,
-    /// Policy for every robot_node: a checkpoint path, `greedy` for the scripted controller,
-    /// or (default) the bundled SMAPPO policy policy/pretrained/smappo_6.4_2.safetensors.
+    /// Policy for every robot_node: a checkpoint path, `greedy` or `greedy-orca` for the
+    /// scripted controllers, or (default) the bundled SMAPPO policy
+    /// policy/pretrained/smappo_6.4_2.safetensors. A checkpoint runs behind the action
+    /// shield with `--robot-param shield:=true`.
     #[arg(long)]
     pub policy: Option<PathBuf>,
     /// realtime (bridge steps at --rate-hz) or lockstep (reproducible, see docs/adr/0003-lockstep.md).
@@ -210,6 +212,11 @@ struct Plan {
 
 impl Plan {
     fn new(mut a: FleetArgs) -> Result<Plan> {
+        // greedy-orca is a robot_node controller (obs::orca), not a checkpoint.
+        if a.policy.as_deref() == Some(Path::new("greedy-orca")) {
+            a.policy = Some("greedy".into());
+            a.robot_params.push("controller:=greedy-orca".into());
+        }
         a.policy = resolve_policy(a.policy.take());
         let setup: sim::Setup = a.setup.parse().map_err(|e| anyhow!("--setup: {e}"))?;
         if !(a.duration.is_finite() && a.duration > 0.0) {
