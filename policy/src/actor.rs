@@ -289,7 +289,44 @@ impl Actor {
         cfg: PpoActorConfig,
         total_rows: usize,
     ) -> Result<ActorLossStats, PolicyError> {
+        self.ppo_grads_part_biased(
+            obs,
+            t,
+            b,
+            h0,
+            masks,
+            actions,
+            old_logp,
+            adv,
+            &[],
+            cfg,
+            total_rows,
+        )
+    }
+
+    /// [`ppo_grads_part`](Self::ppo_grads_part) with `logit_bias` (T*B*n_actions entries,
+    /// or empty for none) added to the logits before the softmax: the action shield's
+    /// masks, so that the update scores actions under the distribution the rollout
+    /// sampled from.
+    #[allow(clippy::too_many_arguments)]
+    pub fn ppo_grads_part_biased(
+        &mut self,
+        obs: &ObsBatch,
+        t: usize,
+        b: usize,
+        h0: &[f32],
+        masks: &[f32],
+        actions: &[u8],
+        old_logp: &[f32],
+        adv: &[f32],
+        logit_bias: &[f32],
+        cfg: PpoActorConfig,
+        total_rows: usize,
+    ) -> Result<ActorLossStats, PolicyError> {
         let n = t * b;
+        if !logit_bias.is_empty() {
+            check_len("logit_bias", logit_bias.len(), n * self.arch.n_actions)?;
+        }
         check_len("actions", actions.len(), n)?;
         check_len("old_logp", old_logp.len(), n)?;
         check_len("adv", adv.len(), n)?;
@@ -307,9 +344,17 @@ impl Actor {
         let dl = sized(&mut c.dlogits, n * k);
         let mut st = ActorLossStats::default();
         let inv = 1.0 / total_rows.max(1) as f32;
+        let mut biased = Vec::with_capacity(if logit_bias.is_empty() { 0 } else { k });
         for r in 0..n {
             let lp = &mut logp[r * k..(r + 1) * k];
-            categorical::log_softmax(&c.head.y[r * k..(r + 1) * k], lp);
+            let y = &c.head.y[r * k..(r + 1) * k];
+            if logit_bias.is_empty() {
+                categorical::log_softmax(y, lp);
+            } else {
+                biased.clear();
+                biased.extend(y.iter().zip(&logit_bias[r * k..]).map(|(a, b)| a + b));
+                categorical::log_softmax(&biased, lp);
+            }
             let a = actions[r] as usize;
             let ratio = (lp[a] - old_logp[r]).exp();
             let clipped = ratio.clamp(1.0 - cfg.clip, 1.0 + cfg.clip);
