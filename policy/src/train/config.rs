@@ -52,6 +52,10 @@ pub struct TrainConfig {
     pub mappo_max_storages: usize,
     /// Save checkpoints every this many updates (and at the end / on Ctrl-C).
     pub save_every: usize,
+    /// Sample rollout actions behind the one-step action shield (`obs::shield`, the one
+    /// `tending eval --shield` and robot_node `shield:=true` use) and score them under the
+    /// same masked distribution in the update. Off by default (the paper's training).
+    pub shield: bool,
 }
 
 impl Default for TrainConfig {
@@ -79,6 +83,7 @@ impl Default for TrainConfig {
             mappo_max_machines: 28,
             mappo_max_storages: 14,
             save_every: 5,
+            shield: false,
         }
     }
 }

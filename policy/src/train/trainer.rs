@@ -121,6 +121,8 @@ struct Rollout {
     dones: Vec<bool>,
     actions: Vec<u8>,
     logp: Vec<f32>,
+    /// Shield logit bias, n_actions per entry (empty when the shield is off).
+    shield: Vec<f32>,
     /// critic outputs (normalised when ValueNorm is on)
     values: Vec<f32>,
     rewards: Vec<f32>,
@@ -140,6 +142,7 @@ struct MiniBatch {
     hc: Vec<f32>,
     actions: Vec<u8>,
     logp: Vec<f32>,
+    shield: Vec<f32>,
     adv: Vec<f32>,
     values: Vec<f32>,
     ret: Vec<f32>,
@@ -573,6 +576,7 @@ impl Trainer {
         for v in [
             &mut buf.masks,
             &mut buf.logp,
+            &mut buf.shield,
             &mut buf.values,
             &mut buf.rewards,
             &mut buf.ha,
@@ -589,6 +593,10 @@ impl Trainer {
         let mut lp = vec![0.0f32; self.actor.arch.n_actions];
         let mut acts = vec![0u8; b];
         let mut finished = vec![];
+        let shield = cfg
+            .shield
+            .then(|| sim::baselines::shield_params(venv.envs()[0].sizes(), &self.scenario));
+        let mut bias = vec![0.0f32; self.actor.arch.n_actions];
         for t in 0..t_len {
             venv.observe(&mut step_obs);
             if t % l == 0 {
@@ -612,10 +620,24 @@ impl Trainer {
                         .map(|x| x.to_vec())
                 },
             );
-            let (logits, values) = (ra?, rc?);
+            let (mut logits, values) = (ra?, rc?);
             let k = lp.len();
             for r in 0..b {
-                let lg = &logits[r * k..(r + 1) * k];
+                let lg = &mut logits[r * k..(r + 1) * k];
+                if let Some(sp) = &shield {
+                    let safe = obs::shield::safe_actions(
+                        step_obs.own_row(r),
+                        step_obs.machines_row(r),
+                        step_obs.storages_row(r),
+                        step_obs.peers_row(r),
+                        sp,
+                    );
+                    bias.iter_mut().for_each(|x| *x = 0.0);
+                    obs::shield::mask_logits(&mut bias, &safe);
+                    lg.iter_mut().zip(&bias).for_each(|(l, b)| *l += b);
+                    buf.shield.extend_from_slice(&bias);
+                }
+                let lg = &*lg;
                 categorical::log_softmax(lg, &mut lp);
                 let a = categorical::sample(lg, rng.gen::<f32>());
                 acts[r] = a as u8;
@@ -727,6 +749,13 @@ impl Trainer {
                     mb.actions.extend(rows.iter().map(|&r| buf.actions[r]));
                     mb.logp.clear();
                     mb.logp.extend(rows.iter().map(|&r| buf.logp[r]));
+                    mb.shield.clear();
+                    if !buf.shield.is_empty() {
+                        let k = self.actor.arch.n_actions;
+                        for &r in &rows {
+                            mb.shield.extend_from_slice(&buf.shield[r * k..(r + 1) * k]);
+                        }
+                    }
                     mb.adv.clear();
                     mb.adv.extend(rows.iter().map(|&r| buf.adv[r]));
                     mb.values.clear();
@@ -750,7 +779,7 @@ impl Trainer {
                     let (actor, critic, mb) = (&mut self.actor, &mut self.critic, &self.mb);
                     let (ra, rc) = rayon::join(
                         || {
-                            actor.ppo_grads_part(
+                            actor.ppo_grads_part_biased(
                                 &mb.obs,
                                 l,
                                 bu,
@@ -759,6 +788,7 @@ impl Trainer {
                                 &mb.actions,
                                 &mb.logp,
                                 &mb.adv,
+                                &mb.shield,
                                 pcfg,
                                 mb_rows,
                             )
