@@ -8,6 +8,7 @@ mod fleet;
 mod plot;
 mod plot_cmd;
 mod plot_font;
+mod plot_pareto;
 mod render;
 mod report;
 mod sim_cmd;

@@ -37,6 +37,8 @@ pub enum PlotKind {
     Bars(BarsArgs),
     /// Training curves (reward, parts, MU vs episodes) per model from log.csv files.
     Curves(CurvesArgs),
+    /// Parts vs contacts per robot-step, a panel per setup, a point per eval results.csv.
+    Pareto(crate::plot_pareto::ParetoArgs),
 }
 
 #[derive(Args, Debug)]
@@ -87,6 +89,7 @@ pub fn run(a: PlotArgs) -> Result<()> {
     match a.kind {
         PlotKind::Bars(b) => run_bars(&b),
         PlotKind::Curves(c) => run_curves(&c),
+        PlotKind::Pareto(p) => crate::plot_pareto::run(&p),
     }
 }
 

@@ -1,0 +1,214 @@
+//! `tending plot pareto`: parts delivered against contacts per robot-step, one panel per
+//! setup, one point per method (a `tending eval` results.csv each, mean over its seeds).
+//! Up and to the left is better; the points a method can be compared on are in one panel.
+
+use crate::plot_font::{draw_text, draw_text_up, Align};
+use anyhow::{bail, Context, Result};
+use clap::Args;
+use plotters::prelude::*;
+use serde::Deserialize;
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+
+#[derive(Args, Debug)]
+pub struct ParetoArgs {
+    /// `tending eval` results.csv files, one per method (its `policy` column names it).
+    #[arg(required = true)]
+    pub files: Vec<PathBuf>,
+    /// Output PNG.
+    #[arg(long)]
+    pub out: PathBuf,
+    #[arg(long, default_value = "parts vs contacts")]
+    pub title: String,
+}
+
+/// The columns of results.csv this plot reads (others are ignored).
+#[derive(Debug, Deserialize)]
+struct Row {
+    policy: String,
+    setup: String,
+    parts_delivered: f64,
+    contacts_per_robot_step: f64,
+}
+
+/// (method, setup) -> (mean parts, mean contacts per robot-step) over the file's rows.
+type Points = BTreeMap<String, BTreeMap<String, (f64, f64)>>;
+
+fn read(files: &[PathBuf]) -> Result<(Vec<String>, Points)> {
+    let mut methods = vec![];
+    let mut pts: Points = BTreeMap::new();
+    for f in files {
+        let mut r = csv::Reader::from_path(f).with_context(|| format!("read {}", f.display()))?;
+        let mut sums: BTreeMap<String, (f64, f64, f64)> = BTreeMap::new();
+        let mut method = None;
+        for (i, row) in r.deserialize::<Row>().enumerate() {
+            let row = row.with_context(|| {
+                format!(
+                    "{} row {}: needs policy, setup, parts_delivered, \
+                     contacts_per_robot_step (a results.csv of this tending version)",
+                    f.display(),
+                    i + 2
+                )
+            })?;
+            method.get_or_insert(row.policy.clone());
+            let e = sums.entry(row.setup).or_default();
+            *e = (
+                e.0 + row.parts_delivered,
+                e.1 + row.contacts_per_robot_step,
+                e.2 + 1.0,
+            );
+        }
+        let Some(m) = method else {
+            bail!("{}: no data rows", f.display());
+        };
+        // Short names: the checkpoint file in parentheses is the same for all learned rows.
+        let m = m.split(" (").next().unwrap_or(&m).to_string();
+        for (setup, (p, c, n)) in sums {
+            pts.entry(setup)
+                .or_default()
+                .insert(m.clone(), (p / n, c / n));
+        }
+        methods.push(m);
+    }
+    Ok((methods, pts))
+}
+
+const COLOURS: [RGBColor; 6] = [
+    RGBColor(200, 40, 40),
+    RGBColor(230, 140, 20),
+    RGBColor(40, 90, 200),
+    RGBColor(30, 150, 60),
+    RGBColor(140, 60, 170),
+    RGBColor(90, 90, 90),
+];
+
+fn setup_key(s: &str) -> Vec<u64> {
+    s.split(['.', '_']).filter_map(|x| x.parse().ok()).collect()
+}
+
+pub fn run(a: &ParetoArgs) -> Result<()> {
+    let (methods, pts) = read(&a.files)?;
+    let mut setups: Vec<&String> = pts.keys().collect();
+    setups.sort_by_key(|s| setup_key(s));
+    draw(&a.out, &a.title, &methods, &setups, &pts)
+}
+
+fn draw(
+    path: &Path,
+    title: &str,
+    methods: &[String],
+    setups: &[&String],
+    pts: &Points,
+) -> Result<()> {
+    let e = |x: DrawingAreaErrorKind<_>| anyhow::anyhow!("plot {}: {x:?}", path.display());
+    let cols = 3usize;
+    let rows = setups.len().div_ceil(cols).max(1);
+    let (pw, ph) = (380i32, 300i32);
+    let (w, h) = (pw * cols as i32, 70 + ph * rows as i32);
+    let root = BitMapBackend::new(path, (w as u32, h as u32)).into_drawing_area();
+    root.fill(&WHITE).map_err(e)?;
+    let black = RGBColor(0, 0, 0);
+    draw_text(&root, title, (w / 2, 8), Align::Center, 2, black);
+    // Legend: a filled square and the method name each.
+    let mut x = 20;
+    for (i, m) in methods.iter().enumerate() {
+        let c = COLOURS[i % COLOURS.len()];
+        root.draw(&Rectangle::new([(x, 36), (x + 12, 48)], c.filled()))
+            .map_err(e)?;
+        draw_text(&root, m, (x + 18, 38), Align::Left, 2, black);
+        x += 18 + 12 * m.len() as i32 + 30;
+    }
+    for (k, setup) in setups.iter().enumerate() {
+        let (cx, cy) = ((k % cols) as i32 * pw, 70 + (k / cols) as i32 * ph);
+        let by = &pts[*setup];
+        let xmax = by.values().map(|p| p.1).fold(0.0, f64::max).max(1e-3) * 1.15;
+        let ymax = by.values().map(|p| p.0).fold(0.0, f64::max).max(1.0) * 1.15;
+        // Plot area inside the panel.
+        let (l, t, r, b) = (cx + 50, cy + 28, cx + pw - 14, cy + ph - 40);
+        let px = |v: f64| l + ((v / xmax) * (r - l) as f64) as i32;
+        let py = |v: f64| b - ((v / ymax) * (b - t) as f64) as i32;
+        let grey = RGBColor(150, 150, 150);
+        root.draw(&PathElement::new(vec![(l, t), (l, b), (r, b)], black))
+            .map_err(e)?;
+        draw_text(&root, setup, ((l + r) / 2, cy + 8), Align::Center, 2, black);
+        draw_text(&root, "0", (l, b + 6), Align::Center, 1, grey);
+        draw_text(
+            &root,
+            &format!("{xmax:.3}"),
+            (r, b + 6),
+            Align::Right,
+            1,
+            grey,
+        );
+        draw_text(
+            &root,
+            "contacts / robot-step",
+            ((l + r) / 2, b + 20),
+            Align::Center,
+            1,
+            black,
+        );
+        draw_text(
+            &root,
+            &format!("{ymax:.0}"),
+            (l - 4, t),
+            Align::Right,
+            1,
+            grey,
+        );
+        draw_text_up(&root, "parts", (cx + 12, (t + b) / 2), 1, black);
+        for (i, m) in methods.iter().enumerate() {
+            if let Some(&(parts, contacts)) = by.get(m) {
+                let c = COLOURS[i % COLOURS.len()];
+                let (x, y) = (px(contacts), py(parts));
+                root.draw(&Circle::new((x, y), 6, c.filled())).map_err(e)?;
+                let label = format!("{parts:.0}");
+                draw_text(&root, &label, (x + 9, y - 3), Align::Left, 1, c);
+            }
+        }
+    }
+    root.present().map_err(e)?;
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn reads_eval_csvs_and_draws_a_png() {
+        let dir = std::env::temp_dir().join(format!("pareto_{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let a = dir.join("a.csv");
+        let b = dir.join("b.csv");
+        let head =
+            "policy,setup,seed,episodes,parts_delivered,collisions,contacts_per_robot_step,mu\n";
+        std::fs::write(
+            &a,
+            format!("{head}greedy,6.4_2,0,2,20,4,0.01,0.5\ngreedy,6.4_2,1,2,30,6,0.03,0.6\n"),
+        )
+        .unwrap();
+        std::fs::write(
+            &b,
+            format!("{head}smappo (x.safetensors),6.4_2,0,2,35,300,0.25,0.8\n"),
+        )
+        .unwrap();
+        let (methods, pts) = read(&[a.clone(), b.clone()]).unwrap();
+        assert_eq!(methods, ["greedy", "smappo"]);
+        assert_eq!(pts["6.4_2"]["greedy"], (25.0, 0.02));
+        let out = dir.join("p.png");
+        run(&ParetoArgs {
+            files: vec![a, b],
+            out: out.clone(),
+            title: "t".into(),
+        })
+        .unwrap();
+        assert!(std::fs::metadata(&out).unwrap().len() > 1000);
+        // A file without the per-robot-step column is refused with its name.
+        let old = dir.join("old.csv");
+        std::fs::write(&old, "policy,setup,parts_delivered\ng,6.4_2,3\n").unwrap();
+        let err = format!("{:#}", read(&[old]).unwrap_err());
+        assert!(err.contains("old.csv"), "{err}");
+        std::fs::remove_dir_all(&dir).ok();
+    }
+}
