@@ -484,6 +484,34 @@ mod tests {
     }
 
     #[test]
+    fn greedy_orca_shield_and_reach_parameters() {
+        let p = parse_ok(&[
+            "--ros-args",
+            "-p",
+            "controller:=greedy-orca",
+            "-p",
+            "reach:=0.05",
+        ]);
+        assert_eq!(p.controller, ControllerKind::GreedyOrca);
+        assert_eq!(p.reach, Some(0.05));
+        assert!(!p.shield);
+        let p = parse_ok(&[
+            "--ros-args",
+            "-p",
+            "policy:=/tmp/p.safetensors",
+            "-p",
+            "shield:=true",
+        ]);
+        assert_eq!(p.controller, ControllerKind::Policy);
+        assert!(p.shield);
+        for bad in ["shield:=3", "reach:=-1", "controller:=orca"] {
+            let e = parse(["--ros-args", "-p", bad].iter().copied(), None).unwrap_err();
+            let name = bad.split(":=").next().unwrap();
+            assert!(e.to_string().contains(name), "{bad}: {e}");
+        }
+    }
+
+    #[test]
     fn domain_id_from_env() {
         let (p, _) = parse(Vec::<String>::new(), Some("42")).unwrap();
         assert_eq!(p.domain_id, 42);
