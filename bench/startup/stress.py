@@ -54,7 +54,11 @@ def one_run(bin_dir, setup, duration, domain, log_dir):
     parts = final['parts_delivered'] if final else 0
     robots_end = final['robots'] if final else 0
     ok = (p.returncode == 0 and not killed and parts > 0 and robots_end >= n and restarts == 0)
-    last_err = err.strip().splitlines()[-1] if err.strip() else ''
+    # the reason: the CLI's error line (`tending: error: ...`, or `Error: ...` from builds
+    # that returned the error from main with a backtrace after it), else the last line
+    err_lines = err.strip().splitlines()
+    last_err = next((l for l in reversed(err_lines) if l.startswith(('tending: error', 'Error:'))),
+                    err_lines[-1] if err_lines else '')
     return {
         'ok': ok, 'exit': 'hung (killed)' if killed else p.returncode, 'wall_s': round(wall, 1),
         'parts': parts, 'robots_end': robots_end, 'restarts': restarts,

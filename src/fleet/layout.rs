@@ -8,20 +8,29 @@
 //! per topic shared by all of them (0 % missed ticks for 100-200 robots in one process,
 //! docs/bench/ros.md), each robot still with its own `cmd_vel` writer and controller.
 //!
-//! The rule: at most [`PROCESSES_PER_CORE`] robot processes per core; a larger fleet is
-//! split into that many processes of consecutive robots. `--robots-per-process K`
-//! overrides it (K = 1: one process per robot whatever the size).
+//! The rule: one process per robot up to [`PROCESSES_PER_CORE`] processes per core; a
+//! larger fleet runs as [`GROUPS_PER_CORE`] processes per core, each hosting a run of
+//! consecutive robots. Measured here (docs/bench/startup.md): 100.16_2 as 20 processes of
+//! 5 lost most robots under load (each process carries a participant with 234 readers and
+//! its discovery traffic), as 4 processes of 25 it ran at 10 Hz with every robot on state.
+//! `--robots-per-process K` overrides it (K = 1: one process per robot whatever the size).
 
-/// Robot processes per available core before robots are grouped.
+/// Single-robot processes per available core before robots are grouped.
 pub const PROCESSES_PER_CORE: usize = 10;
+/// Processes per available core once robots are grouped.
+pub const GROUPS_PER_CORE: usize = 2;
 
 /// Robots per process for `n` robots on `cores` cores, or `forced` when given.
 pub fn robots_per_process(n: usize, cores: usize, forced: Option<usize>) -> usize {
     if let Some(k) = forced {
         return k.max(1);
     }
-    let max_procs = (PROCESSES_PER_CORE * cores.max(1)).max(1);
-    n.div_ceil(max_procs).max(1)
+    let cores = cores.max(1);
+    if n <= PROCESSES_PER_CORE * cores {
+        1
+    } else {
+        n.div_ceil(GROUPS_PER_CORE * cores)
+    }
 }
 
 /// The robot names of each process, in order: `robot_0..` split into runs of `per`.
@@ -51,10 +60,11 @@ mod tests {
     fn small_fleets_get_one_process_per_robot_large_ones_are_grouped() {
         assert_eq!(robots_per_process(6, 2, None), 1);
         assert_eq!(robots_per_process(20, 2, None), 1);
-        assert_eq!(robots_per_process(21, 2, None), 2);
-        assert_eq!(robots_per_process(50, 2, None), 3);
-        assert_eq!(robots_per_process(100, 2, None), 5);
+        assert_eq!(robots_per_process(21, 2, None), 6);
+        assert_eq!(robots_per_process(50, 2, None), 13);
+        assert_eq!(robots_per_process(100, 2, None), 25);
         assert_eq!(robots_per_process(100, 16, None), 1);
+        assert_eq!(robots_per_process(200, 16, None), 7);
         assert_eq!(robots_per_process(0, 0, None), 1);
         // the override wins both ways
         assert_eq!(robots_per_process(100, 2, Some(1)), 1);
@@ -65,11 +75,13 @@ mod tests {
     #[test]
     fn groups_cover_every_robot_once_in_order() {
         let g = groups(&names(50), robots_per_process(50, 2, None));
-        assert_eq!(g.len(), 17);
-        assert!(g.iter().all(|x| x.len() <= 3));
+        assert_eq!(g.len(), 4);
+        assert!(g.iter().all(|x| x.len() <= 13));
         assert_eq!(g.concat(), names(50));
-        assert_eq!(label(&g[0]), "robot_0-robot_2");
-        assert_eq!(label(&g[16]), "robot_48-robot_49");
+        assert_eq!(label(&g[0]), "robot_0-robot_12");
+        assert_eq!(label(&g[3]), "robot_39-robot_49");
+        let g = groups(&names(7), 3);
+        assert_eq!(g.iter().map(Vec::len).collect::<Vec<_>>(), [3, 3, 1]);
         assert_eq!(label(&["robot_7".to_string()]), "robot_7");
     }
 }

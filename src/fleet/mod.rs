@@ -76,8 +76,8 @@ pub struct FleetArgs {
     #[arg(long, default_value_t = 2.0)]
     pub stale_timeout: f64,
     /// Robots hosted per robot_node process (each keeps its own controller and cmd_vel).
-    /// Default: one per robot up to 10 processes per core, larger fleets split into that
-    /// many processes (20 on 2 cores: 100 robots run as 20 processes of 5).
+    /// Default: one per robot up to 10 processes per core; a larger fleet runs as 2
+    /// processes per core (on 2 cores: 100 robots as 4 processes of 25).
     #[arg(long)]
     pub robots_per_process: Option<usize>,
     /// Extra `-p NAME:=VALUE` for every robot_node (repeatable; e.g. test_delay_ms:=50).
