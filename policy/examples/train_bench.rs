@@ -1,5 +1,5 @@
 //! Time PPO updates: `cargo run --release -p policy --features train --example train_bench
-//! -- [setup] [n_envs] [ppo_epoch] [updates] [smappo|mappo]`.
+//! -- [setup] [n_envs] [ppo_epoch] [updates] [smappo|mappo] [num_mini_batch]`.
 
 use policy::train::{parse_curriculum, TrainConfig, Trainer};
 use policy::ModelKind;
@@ -14,9 +14,11 @@ fn main() {
         Some("mappo") => ModelKind::Mappo,
         _ => ModelKind::Smappo,
     };
+    let num_mini_batch: usize = a.get(5).and_then(|x| x.parse().ok()).unwrap_or(1);
     let cfg = TrainConfig {
         n_envs,
         ppo_epoch: epochs,
+        num_mini_batch,
         ..TrainConfig::default()
     };
     let sched = parse_curriculum(&format!("{setup}:1000000")).unwrap();
