@@ -5,8 +5,8 @@ set -euo pipefail
 old=$1 new=$2 rounds=${3:-4} steps=${4:-8} what=${5:-actor}
 o=(); n=()
 for _ in $(seq "$rounds"); do
-  o+=($("$old" "$steps" "$what" | tail -n +3))
-  n+=($("$new" "$steps" "$what" | tail -n +3))
+  o+=($("$old" "$steps" "$what" | grep -v cpu_ms | tail -n +3))
+  n+=($("$new" "$steps" "$what" | grep -v cpu_ms | tail -n +3))
 done
 med() { printf '%s\n' "$@" | sort -g | awk '{a[NR]=$1} END {print a[int((NR+1)/2)]}'; }
 mo=$(med "${o[@]}"); mn=$(med "${n[@]}")

@@ -165,13 +165,16 @@ def check(binary, ckpt, path):
     return ok
 
 
-def torch_steps(n_steps, d):
+def torch_steps(n_steps, d, warm=2):
+    """Wall ms per step, and process CPU ms per step after `warm` steps."""
     m = Actor()
     m.load(d)
     opt = torch.optim.Adam(m.parameters(), lr=5e-4, eps=1e-5)
     own, groups, h0, masks, actions, old_logp, adv = inputs(d)
     times = []
-    for _ in range(n_steps):
+    for i in range(n_steps):
+        if i == warm:
+            c0 = time.process_time()
         t0 = time.perf_counter()
         opt.zero_grad()
         loss = ppo_loss(m(own, groups, h0, masks), actions, old_logp, adv)
@@ -179,12 +182,15 @@ def torch_steps(n_steps, d):
         torch.nn.utils.clip_grad_norm_(m.parameters(), 10.0)
         opt.step()
         times.append((time.perf_counter() - t0) * 1e3)
-    return times
+    return times, (time.process_time() - c0) * 1e3 / (n_steps - warm)
 
 
 def ours_steps(binary, n_steps):
+    """Wall ms per step, and process CPU ms per step (over all steps)."""
     out = subprocess.run([binary, str(n_steps)], check=True, capture_output=True, text=True)
-    return [float(x) for x in out.stdout.split()]
+    lines = out.stdout.split("\n")
+    cpu = [float(l.split()[1]) for l in lines if l.startswith("cpu_ms_per_step")]
+    return [float(x) for x in lines if x and not x.startswith("cpu")], cpu[0]
 
 
 def main():
@@ -200,21 +206,30 @@ def main():
     os.makedirs(os.path.dirname(path), exist_ok=True)
     ok = check(a.binary, a.checkpoint, path)
     d = load_file(path)
-    ours, theirs = [], []
+    ours, theirs, ocpu, tcpu = [], [], [], []
     load0 = os.getloadavg()
+    os.environ["RAYON_NUM_THREADS"] = str(a.threads)  # ours gets the same thread count
     for r in range(a.rounds):
         # the first 2 steps of each run warm caches, allocators and thread pools
-        ours += ours_steps(a.binary, a.steps + 2)[2:]
-        theirs += torch_steps(a.steps + 2, d)[2:]
-        print(f"round {r + 1}: ours {statistics.median(ours[-a.steps:]):.1f} ms, "
-              f"PyTorch {statistics.median(theirs[-a.steps:]):.1f} ms")
+        w, c = ours_steps(a.binary, a.steps + 2)
+        ours += w[2:]
+        ocpu.append(c)
+        w, c = torch_steps(a.steps + 2, d)
+        theirs += w[2:]
+        tcpu.append(c)
+        print(f"round {r + 1}: ours {statistics.median(ours[-a.steps:]):.1f} ms "
+              f"(CPU {ocpu[-1]:.1f}), PyTorch {statistics.median(theirs[-a.steps:]):.1f} ms "
+              f"(CPU {tcpu[-1]:.1f})")
     mo, mt = statistics.median(ours), statistics.median(theirs)
+    co, ct = statistics.median(ocpu), statistics.median(tcpu)
     load1 = os.getloadavg()
     print(f"{datetime.datetime.now(datetime.timezone.utc):%Y-%m-%d %H:%M} UTC, torch "
-          f"{torch.__version__}, {a.threads} threads, load {load0[0]:.2f} -> {load1[0]:.2f}")
+          f"{torch.__version__}, {a.threads} threads each, load {load0[0]:.2f} -> {load1[0]:.2f}")
     print(f"actor PPO step 14.10_4, 4,800 rows: ours median {mo:.1f} ms (min {min(ours):.1f}), "
           f"PyTorch same algebra median {mt:.1f} ms (min {min(theirs):.1f}); "
-          f"ours/PyTorch {mo / mt:.2f}")
+          f"ours/PyTorch {mo / mt:.2f} wall")
+    print(f"CPU time per step (all threads): ours {co:.1f} ms, PyTorch {ct:.1f} ms; "
+          f"ours/PyTorch {co / ct:.2f}")
     if not ok:
         raise SystemExit("the two implementations differ")
 

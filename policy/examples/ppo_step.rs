@@ -1,7 +1,8 @@
 //! The actor PPO minibatch step of `bench_nn` alone (14.10_4, T=10 x B=480 = 4,800 rows),
 //! repeated, for profilers and for side-by-side timing:
 //! `cargo run --release -p policy --example ppo_step -- [steps] [actor|critic]`.
-//! Prints one line per step: milliseconds.
+//! Prints one line per step: milliseconds; then `cpu_ms_per_step X`, the process CPU time
+//! (all threads) per step, which other processes' load inflates far less than wall time.
 //!
 //! `ppo_step export CHECKPOINT OUT.safetensors`: the actor of CHECKPOINT, one batch of the
 //! same shape, its logits and the PPO loss gradient of every parameter (before clipping
@@ -141,6 +142,19 @@ fn export(ckpt: &str, out: &str) {
     println!("wrote {out}: loss {}", st.loss);
 }
 
+/// User + system CPU time of this process (all threads), seconds.
+fn cpu_secs() -> f64 {
+    let s = std::fs::read_to_string("/proc/self/stat").unwrap_or_default();
+    let f: Vec<&str> = s
+        .rsplit(')')
+        .next()
+        .unwrap_or("")
+        .split_whitespace()
+        .collect();
+    let ticks = |i: usize| f.get(i).and_then(|x| x.parse::<f64>().ok()).unwrap_or(0.0);
+    (ticks(11) + ticks(12)) / 100.0
+}
+
 fn main() {
     let a: Vec<String> = std::env::args().skip(1).collect();
     if a.first().map(String::as_str) == Some("export") {
@@ -164,6 +178,7 @@ fn main() {
         let old_v = vec![0.0f32; t * b];
         let ret: Vec<f32> = (0..t * b).map(|_| rng.gen_range(-1.0..1.0)).collect();
         let mut critic = Critic::new(ArchConfig::smappo(), 2);
+        let c0 = cpu_secs();
         for _ in 0..steps {
             let t0 = Instant::now();
             critic
@@ -182,6 +197,10 @@ fn main() {
             critic.step(10.0);
             println!("{:.2}", t0.elapsed().as_secs_f64() * 1e3);
         }
+        println!(
+            "cpu_ms_per_step {:.2}",
+            (cpu_secs() - c0) * 1e3 / steps.max(1) as f64
+        );
         return;
     }
     let b = 480;
@@ -194,6 +213,7 @@ fn main() {
         adv,
     } = actor_batch(&mut rng);
     let mut actor = Actor::new(ArchConfig::smappo(), 1);
+    let c0 = cpu_secs();
     for _ in 0..steps {
         let t0 = Instant::now();
         actor
@@ -212,4 +232,8 @@ fn main() {
         actor.step(10.0);
         println!("{:.2}", t0.elapsed().as_secs_f64() * 1e3);
     }
+    println!(
+        "cpu_ms_per_step {:.2}",
+        (cpu_secs() - c0) * 1e3 / steps.max(1) as f64
+    );
 }
