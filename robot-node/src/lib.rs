@@ -8,7 +8,7 @@
 //! - [`tick`]: one control step, DDS-free;
 //! - [`fanout`]: one received sample to every robot a process hosts, DDS-free;
 //! - [`node`]: the ros2-client node (discovery, one reader per topic, timing, cmd_vel);
-//! - [`watchdog`]: exit code 75 when start-up or the control loop hangs (RustDDS deadlock).
+//! - [`watchdog`]: exit code 75 when start-up or the control loop hangs (the stages it names).
 
 pub mod args;
 pub mod controller;
