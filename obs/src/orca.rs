@@ -115,7 +115,8 @@ impl GreedyOrca {
         self.prev_peers.clear();
     }
 
-    /// Velocity command (vx, vy), m/s, for one observation row (layout of `ObsBatch`).
+    /// Velocity command (vx, vy), m/s, for one observation row (layout of `ObsBatch`):
+    /// the greedy preferred velocity through [`Self::filter`].
     pub fn velocity(
         &mut self,
         own: &[f32],
@@ -123,13 +124,68 @@ impl GreedyOrca {
         storages: &[f32],
         peers: &[f32],
     ) -> [f32; 2] {
+        let pref = self.greedy_preferred(own, machines, storages, peers);
+        self.filter(own, machines, storages, peers, pref)
+    }
+
+    /// Boxes get less clearance than peers when the reach is short: the robot must get
+    /// within `reach` of its target box, and ORCA keeps it this far away.
+    fn box_clearance(&self) -> f32 {
+        self.params.clearance.min(0.4 * self.params.reach)
+    }
+
+    /// Greedy's preferred velocity: straight for a point just inside reach of the
+    /// [`greedy_target`] box, at most K_speed; zero with nothing to do.
+    pub fn greedy_preferred(
+        &self,
+        own: &[f32],
+        machines: &[f32],
+        storages: &[f32],
+        peers: &[f32],
+    ) -> [f32; 2] {
+        let p = &self.params;
+        let g = &p.greedy;
+        let (r, k, dt) = (g.robot_radius, g.k_speed, g.dt);
+        match greedy_target(own, machines, storages, peers, g) {
+            Some(t) => {
+                let q = nearest_on_box(t.rel, t.half, [0.0, 0.0]);
+                let d = norm(q);
+                // Stop between the box clearance ORCA keeps and the reach: close enough
+                // to pick or place, not so close that ORCA holds the robot off.
+                let stand_off = r + 0.5 * (self.box_clearance() + p.reach);
+                if d <= stand_off {
+                    [0.0, 0.0]
+                } else {
+                    let go = (d - stand_off) / d;
+                    let v = [q[0] * go / dt, q[1] * go / dt];
+                    let s = norm(v);
+                    if s > k {
+                        [v[0] * k / s, v[1] * k / s]
+                    } else {
+                        v
+                    }
+                }
+            }
+            None => [0.0, 0.0],
+        }
+    }
+
+    /// ORCA as a safety filter: the velocity nearest to `pref` (m/s) that avoids the
+    /// observed peers, boxes and walls over the horizons. Call once per period (it records
+    /// the observation to estimate velocities next time).
+    pub fn filter(
+        &mut self,
+        own: &[f32],
+        machines: &[f32],
+        storages: &[f32],
+        peers: &[f32],
+        pref: [f32; 2],
+    ) -> [f32; 2] {
         let p = self.params;
         let g = &p.greedy;
         let (r, k, dt) = (g.robot_radius, g.k_speed, g.dt);
         let pos = [own[0], own[1]];
-        // Boxes get less clearance than peers when the reach is short: the robot must get
-        // within `reach` of its target box, and ORCA keeps it `box_clearance` away.
-        let box_clearance = p.clearance.min(0.4 * p.reach);
+        let box_clearance = self.box_clearance();
         // A jump of more than two full steps is a reset or a teleport, not motion.
         let max_jump = 2.0 * k * dt;
         let vel_of = |now: [f32; 2], prev: [f32; 2]| {
@@ -147,29 +203,10 @@ impl GreedyOrca {
                 .chunks_exact(3)
                 .map(|q| [pos[0] + q[0], pos[1] + q[1]]),
         );
-
-        // Preferred velocity: straight for a point just inside reach of the target box.
-        let pref = match greedy_target(own, machines, storages, peers, g) {
-            Some(t) => {
-                let q = nearest_on_box(t.rel, t.half, [0.0, 0.0]);
-                let d = norm(q);
-                // Stop between the box clearance ORCA keeps and the reach: close enough
-                // to pick or place, not so close that ORCA holds the robot off.
-                let stand_off = r + 0.5 * (box_clearance + p.reach);
-                if d <= stand_off {
-                    [0.0, 0.0]
-                } else {
-                    let go = (d - stand_off) / d;
-                    let v = [q[0] * go / dt, q[1] * go / dt];
-                    let s = norm(v);
-                    if s > k {
-                        [v[0] * k / s, v[1] * k / s]
-                    } else {
-                        v
-                    }
-                }
-            }
-            None => [0.0, 0.0],
+        let pref = if pref[0].is_finite() && pref[1].is_finite() {
+            pref
+        } else {
+            [0.0, 0.0]
         };
 
         let agent_radius = r + 0.5 * p.clearance;

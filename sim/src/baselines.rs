@@ -114,6 +114,35 @@ impl GreedyOrcaFleet {
     }
 }
 
+impl GreedyOrcaFleet {
+    /// ORCA as a safety filter: for every row of `obs`, the velocity nearest to `prefs[r]`
+    /// (m/s; e.g. a learned policy's action as a velocity) that avoids what it observes.
+    pub fn filter(
+        &mut self,
+        obs: &ObsBatch,
+        prefs: &[[f32; 2]],
+        out: &mut Vec<[f32; 2]>,
+    ) -> Result<(), SimError> {
+        if obs.rows != self.robots.len() || prefs.len() != obs.rows {
+            return Err(SimError::WrongCommandCount {
+                expected: self.robots.len(),
+                got: obs.rows.min(prefs.len()),
+            });
+        }
+        out.clear();
+        out.extend(self.robots.iter_mut().enumerate().map(|(r, c)| {
+            c.filter(
+                obs.own_row(r),
+                obs.machines_row(r),
+                obs.storages_row(r),
+                obs.peers_row(r),
+                prefs[r],
+            )
+        }));
+        Ok(())
+    }
+}
+
 /// Apply the shield to every row of `logits` (rows x N_ACTIONS) from the rows of `obs`.
 pub fn shield_logits(obs: &ObsBatch, logits: &mut [f32], p: &ShieldParams) {
     for (r, row) in logits
