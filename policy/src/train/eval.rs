@@ -9,7 +9,7 @@ use rayon::prelude::*;
 use sim::baselines::{
     greedy_action, random_action, shield_logits, shield_params, GreedyOrcaFleet, GreedyParams,
 };
-use sim::{episode_seed, Env, Metrics, ScenarioConfig, Setup};
+use sim::{action_to_velocity, episode_seed, Env, Metrics, ScenarioConfig, Setup};
 
 /// Who picks the actions.
 #[derive(Debug, Clone)]
@@ -21,6 +21,12 @@ pub enum Controller {
     },
     /// The learned actor behind the one-step action shield (`obs::shield`).
     Shielded {
+        actor: Box<Actor>,
+        sample: bool,
+    },
+    /// The learned actor's action, as a velocity, through ORCA as a safety filter
+    /// (`obs::orca::GreedyOrca::filter`): continuous velocities.
+    Filtered {
         actor: Box<Actor>,
         sample: bool,
     },
@@ -52,18 +58,19 @@ pub fn run_episode(
         dt: cfg.world.dt,
     };
     let mut actor = match ctrl {
-        Controller::Learned { actor, .. } | Controller::Shielded { actor, .. } => {
-            Some(actor.as_ref().clone())
-        }
+        Controller::Learned { actor, .. }
+        | Controller::Shielded { actor, .. }
+        | Controller::Filtered { actor, .. } => Some(actor.as_ref().clone()),
         _ => None,
     };
     let shield = shield_params(env.sizes(), cfg);
     let mut orca = match ctrl {
-        Controller::GreedyOrca => Some(GreedyOrcaFleet::new(&env)?),
+        Controller::GreedyOrca | Controller::Filtered { .. } => Some(GreedyOrcaFleet::new(&env)?),
         _ => None,
     };
     let mut vels = Vec::with_capacity(n);
     let mut shielded = Vec::new();
+    let mut prefs = Vec::with_capacity(n);
     let hidden = actor.as_ref().map(|a| a.hidden()).unwrap_or(0);
     let mut h = vec![0.0f32; n * hidden];
     let masks = vec![1.0f32; n];
@@ -95,7 +102,9 @@ pub fn run_episode(
                 env.step_velocities(&vels)?;
                 continue;
             }
-            Controller::Learned { sample, .. } | Controller::Shielded { sample, .. } => {
+            Controller::Learned { sample, .. }
+            | Controller::Shielded { sample, .. }
+            | Controller::Filtered { sample, .. } => {
                 env.observe(&mut obs);
                 let actor = actor.as_mut().expect("learned controller has an actor");
                 let k = actor.arch.n_actions;
@@ -115,6 +124,18 @@ pub fn run_episode(
                     } as u8;
                 }
             }
+        }
+        if let (Controller::Filtered { .. }, Some(orca)) = (ctrl, orca.as_mut()) {
+            let k = cfg.task.k_speed;
+            prefs.clear();
+            prefs.extend(
+                actions
+                    .iter()
+                    .map(|&a| action_to_velocity(a, k).unwrap_or([0.0; 2])),
+            );
+            orca.filter(&obs, &prefs, &mut vels)?;
+            env.step_velocities(&vels)?;
+            continue;
         }
         env.step_actions(&actions)?;
     }
