@@ -34,6 +34,10 @@ pub struct EvalArgs {
     /// actions whose next position would touch an observed body are masked.
     #[arg(long, requires = "checkpoint")]
     pub shield: bool,
+    /// Pass the checkpoint's actions, as velocities, through ORCA as a safety filter
+    /// (obs::orca): continuous velocity commands.
+    #[arg(long, requires = "checkpoint", conflicts_with = "shield")]
+    pub orca_filter: bool,
     /// Scenario config (TOML); default: the simulator's defaults.
     #[arg(long)]
     pub scenario: Option<PathBuf>,
@@ -49,7 +53,13 @@ pub fn run(a: EvalArgs) -> Result<()> {
             let label = format!(
                 "{}{} ({})",
                 pol.kind(),
-                if a.shield { "+shield" } else { "" },
+                if a.shield {
+                    "+shield"
+                } else if a.orca_filter {
+                    "+orca"
+                } else {
+                    ""
+                },
                 p.file_name()
                     .and_then(|f| f.to_str())
                     .unwrap_or("checkpoint")
@@ -58,6 +68,8 @@ pub fn run(a: EvalArgs) -> Result<()> {
             let sample = a.sample;
             let ctrl = if a.shield {
                 Controller::Shielded { actor, sample }
+            } else if a.orca_filter {
+                Controller::Filtered { actor, sample }
             } else {
                 Controller::Learned { actor, sample }
             };
@@ -75,6 +87,8 @@ pub fn run(a: EvalArgs) -> Result<()> {
         (Controller::Learned { .. }, false) => "argmax actions",
         (Controller::Shielded { .. }, true) => "sampled shielded actions",
         (Controller::Shielded { .. }, false) => "argmax shielded actions",
+        (Controller::Filtered { .. }, true) => "sampled actions through the ORCA filter",
+        (Controller::Filtered { .. }, false) => "argmax actions through the ORCA filter",
         _ => "scripted",
     };
     let cfg = crate::sim_cmd::load_config(&a.scenario)?;
