@@ -148,6 +148,8 @@ pub struct PolicyController {
     pub k_speed: f32,
     /// Mask unsafe actions before the argmax (`-p shield:=true`).
     shield: Option<ShieldParams>,
+    /// Pass the action's velocity through ORCA (`-p orca_filter:=true`).
+    filter: Option<GreedyOrca>,
 }
 
 impl PolicyController {
@@ -165,6 +167,7 @@ impl PolicyController {
                 state,
                 k_speed: meta_k.unwrap_or(default_k_speed),
                 shield: None,
+                filter: None,
             },
             meta_k.is_some(),
         ))
@@ -177,7 +180,16 @@ impl PolicyController {
             state,
             k_speed,
             shield: None,
+            filter: None,
         }
+    }
+
+    /// Pass the policy's velocity through ORCA as a safety filter ([`GreedyOrca::filter`],
+    /// the code `tending eval --orca-filter` runs); its k_speed is set to the policy's.
+    pub fn with_orca_filter(mut self, mut params: OrcaParams) -> anyhow::Result<Self> {
+        params.greedy.k_speed = self.k_speed;
+        self.filter = Some(GreedyOrca::new(params).map_err(|e| anyhow::anyhow!(e))?);
+        Ok(self)
     }
 
     /// Put the policy behind the action shield (its k_speed is set to the controller's).
@@ -260,9 +272,22 @@ pub fn checkpoint_k_speed(training: &serde_json::Value) -> Option<f32> {
 impl Controller for PolicyController {
     fn reset(&mut self) {
         self.state.reset();
+        if let Some(f) = &mut self.filter {
+            f.reset();
+        }
     }
     fn act(&mut self, obs: &ObsBatch) -> anyhow::Result<[f32; 2]> {
-        Ok(action_velocity(self.action(obs)?, self.k_speed))
+        let v = action_velocity(self.action(obs)?, self.k_speed);
+        Ok(match &mut self.filter {
+            Some(f) => f.filter(
+                obs.own_row(0),
+                obs.machines_row(0),
+                obs.storages_row(0),
+                obs.peers_row(0),
+                v,
+            ),
+            None => v,
+        })
     }
     fn name(&self) -> &'static str {
         "policy"
@@ -467,6 +492,49 @@ pub(crate) mod tests {
         }
         // The check means something only if unshielded actors would have moved.
         assert!(unshielded_moves > 0);
+    }
+
+    #[test]
+    fn orca_filter_keeps_free_moves_and_holds_back_near_peers() {
+        let mut arch = policy::ArchConfig::smappo();
+        arch.d_model = 8;
+        arch.heads = 2;
+        arch.hidden = 8;
+        let op = OrcaParams::new(params(0.5), 2.3, 0.08);
+        let free = b(
+            [0.0, 0.0],
+            false,
+            vec![([0.9, 0.9], true)],
+            vec![[-0.9, 0.9]],
+        );
+        let peers = [[0.17, 0.0], [-0.17, 0.0], [0.0, 0.17], [0.0, -0.17]];
+        let boxed = ObsBuilder {
+            own_pos: [0.0, 0.0],
+            has_part: false,
+            machines: vec![([0.9, 0.9], true)],
+            storages: vec![[-0.9, 0.9]],
+            peers: peers.iter().map(|p| (*p, false)).collect(),
+        }
+        .build()
+        .unwrap();
+        for seed in 0..4 {
+            let pol =
+                policy::Policy::from_actor(policy::Actor::new(arch, seed), Default::default());
+            let mut plain = PolicyController::from_policy(pol.clone(), 0.5);
+            let mut c = PolicyController::from_policy(pol, 0.5)
+                .with_orca_filter(op)
+                .unwrap();
+            // Nothing near: ORCA leaves the policy's move as it is.
+            let (v, w) = (plain.act(&free).unwrap(), c.act(&free).unwrap());
+            assert!(
+                (v[0] - w[0]).abs() < 1e-4 && (v[1] - w[1]).abs() < 1e-4,
+                "{v:?} {w:?}"
+            );
+            // Peers 1 cm away on every side: no move at speed toward any of them.
+            c.reset();
+            let w = c.act(&boxed).unwrap();
+            assert!(w[0].abs() < 0.25 && w[1].abs() < 0.25, "{w:?}");
+        }
     }
 
     #[test]

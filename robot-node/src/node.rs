@@ -56,6 +56,9 @@ pub fn make_controller(p: &Params) -> anyhow::Result<(Box<dyn Controller>, f64)>
             if p.shield {
                 c = c.with_shield(crate::controller::shield_params(p));
             }
+            if p.orca_filter {
+                c = c.with_orca_filter(crate::controller::orca_params(p))?;
+            }
             let k = c.k_speed as f64;
             info!(
                 "policy {} loaded ({}), k_speed {k} m/s from {}",
