@@ -1,7 +1,8 @@
 //! Lockstep reproducibility of the safety controllers (docs/adr/0006): a fleet of
 //! `robot_node`s running greedy-ORCA (`controller:=greedy-orca`, stateful: it estimates
 //! velocities from successive observations) or the bundled policy behind the action shield
-//! (`shield:=true`) must reproduce the offline episode of the same code exactly.
+//! (`shield:=true`) or through the ORCA filter (`orca_filter:=true`) must reproduce the
+//! offline episode of the same code exactly.
 //! The harness is lockstep_repro.rs's, with extra robot_node parameters.
 //!
 //! Needs the `robot_node` binary next to `sim_bridge` (build both:
@@ -59,6 +60,29 @@ fn offline_greedy_orca(setup: Setup, seed: u64, steps: u32) -> (Offline, Env) {
         env.step_velocities(&vels).unwrap();
     }
     (offline(&env), first)
+}
+
+fn offline_filtered(setup: Setup, seed: u64, steps: u32, path: &std::path::Path) -> Offline {
+    let mut env = Env::new(ScenarioConfig::default(), setup, seed).unwrap();
+    let mut fleet = sim::baselines::GreedyOrcaFleet::new(&env).unwrap();
+    let k = env.config().task.k_speed;
+    let mut pol = policy::Policy::load(path).unwrap();
+    let mut states: Vec<_> = (0..env.n_robots()).map(|_| pol.new_state()).collect();
+    let (mut batch, mut vels) = (obs::ObsBatch::default(), Vec::new());
+    for _ in 0..steps {
+        env.observe(&mut batch);
+        let prefs: Vec<[f32; 2]> = (0..batch.rows)
+            .map(|r| {
+                let a = pol
+                    .act(&batch.row(r), &mut states[r], policy::ActMode::Greedy)
+                    .unwrap();
+                sim::action_to_velocity(a, k).unwrap()
+            })
+            .collect();
+        fleet.filter(&batch, &prefs, &mut vels).unwrap();
+        env.step_velocities(&vels).unwrap();
+    }
+    offline(&env)
 }
 
 fn offline_shielded(setup: Setup, seed: u64, steps: u32, path: &std::path::Path) -> Offline {
@@ -251,4 +275,28 @@ fn shielded_policy_fleet_in_lockstep_reproduces_the_offline_episode() {
         &["shield:=true"],
     );
     assert_same("policy+shield", &off, &m, steps);
+}
+
+#[test]
+fn orca_filtered_policy_fleet_in_lockstep_reproduces_the_offline_episode() {
+    let path = PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .join("../policy/pretrained/smappo_6.4_2.safetensors");
+    if !path.exists() {
+        eprintln!("SKIPPED: no bundled checkpoint at {}", path.display());
+        return;
+    }
+    let setup = Setup::new(6, 4, 2);
+    let (seed, steps) = (1, 200);
+    let off = offline_filtered(setup, seed, steps, &path);
+    let env0 = Env::new(ScenarioConfig::default(), setup, seed).unwrap();
+    let m = fleet_lockstep(
+        setup,
+        seed,
+        steps,
+        domain(2),
+        &env0,
+        Some(&path),
+        &["orca_filter:=true"],
+    );
+    assert_same("policy+orca", &off, &m, steps);
 }
