@@ -22,6 +22,14 @@ fn main() {
         ..TrainConfig::default()
     };
     let sched = parse_curriculum(&format!("{setup}:1000000")).unwrap();
+    // MAPPO pads to fixed maxima (42 robots by default): widen them to the setup benched
+    let mut cfg = cfg;
+    if kind == ModelKind::Mappo {
+        let s = sched[0].setup;
+        cfg.mappo_max_robots = cfg.mappo_max_robots.max(s.robots);
+        cfg.mappo_max_machines = cfg.mappo_max_machines.max(s.machines);
+        cfg.mappo_max_storages = cfg.mappo_max_storages.max(s.storages);
+    }
     let mut t = Trainer::new(kind, cfg, sim::ScenarioConfig::default(), sched, 0).unwrap();
     for _ in 0..updates {
         let t0 = std::time::Instant::now();
