@@ -35,6 +35,89 @@ pub trait Stage: Copy + Eq + fmt::Debug + Send + Sync + 'static {
     fn describe(self) -> &'static str;
 }
 
+/// Defines a node's stage enum and its [`Stage`] implementation from one list: each stage
+/// with its description, in order: the start-up stages (the start-up limit applies), the
+/// running ones (the stall limit applies), and the done stage (not watched).
+///
+/// ```
+/// ros::watchdog_stages! {
+///     /// Where the example node is.
+///     pub enum Stage {
+///         startup { Context => "creating the DDS context", }
+///         running { Running => "in the event loop", }
+///         done Done => "in shutdown",
+///     }
+/// }
+/// use ros::watchdog::Stage as _;
+/// assert!(Stage::Context.is_startup() && !Stage::Running.is_startup());
+/// assert!(Stage::Done.is_done());
+/// assert_eq!(Stage::from_u8(1), Stage::Running);
+/// ```
+#[macro_export]
+macro_rules! watchdog_stages {
+    (
+        $(#[$meta:meta])*
+        pub enum $name:ident {
+            startup {
+                $( $(#[$smeta:meta])* $start:ident => $sdesc:literal, )+
+            }
+            running {
+                $(#[$lmeta:meta])* $first_loop:ident => $ldesc:literal,
+                $( $(#[$rmeta:meta])* $rest:ident => $rdesc:literal, )*
+            }
+            $(#[$dmeta:meta])* done $done:ident => $ddesc:literal $(,)?
+        }
+    ) => {
+        $(#[$meta])*
+        #[derive(Debug, Clone, Copy, PartialEq, Eq)]
+        #[repr(u8)]
+        pub enum $name {
+            $( $(#[$smeta])* $start, )+
+            $(#[$lmeta])* $first_loop,
+            $( $(#[$rmeta])* $rest, )*
+            $(#[$dmeta])* $done,
+        }
+
+        impl $name {
+            const ALL: &'static [$name] =
+                &[$( $name::$start, )+ $name::$first_loop, $( $name::$rest, )* $name::$done];
+        }
+
+        impl $crate::watchdog::Stage for $name {
+            const FIRST: Self = Self::ALL[0];
+
+            fn to_u8(self) -> u8 {
+                self as u8
+            }
+
+            /// Unknown values are the last (done) stage.
+            fn from_u8(x: u8) -> Self {
+                Self::ALL
+                    .get(x as usize)
+                    .copied()
+                    .unwrap_or($name::$done)
+            }
+
+            fn is_startup(self) -> bool {
+                (self as u8) < ($name::$first_loop as u8)
+            }
+
+            fn is_done(self) -> bool {
+                self == $name::$done
+            }
+
+            fn describe(self) -> &'static str {
+                match self {
+                    $( $name::$start => $sdesc, )+
+                    $name::$first_loop => $ldesc,
+                    $( $name::$rest => $rdesc, )*
+                    $name::$done => $ddesc,
+                }
+            }
+        }
+    };
+}
+
 /// Timeouts; zero disables the check.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Limits {
@@ -192,39 +275,32 @@ impl<S: Stage> Watchdog<S> {
 mod tests {
     use super::*;
 
-    #[derive(Debug, Clone, Copy, PartialEq, Eq)]
-    enum Test {
-        Context = 0,
-        Writers = 1,
-        Running = 2,
-        Done = 3,
+    crate::watchdog_stages! {
+        pub enum Test {
+            startup {
+                Context => "creating the DDS context",
+                Writers => "creating the writers",
+            }
+            running {
+                Running => "the event loop",
+            }
+            done Done => "shutdown",
+        }
     }
 
-    impl Stage for Test {
-        const FIRST: Self = Test::Context;
-        fn to_u8(self) -> u8 {
-            self as u8
+    #[test]
+    fn the_macro_numbers_stages_in_order_and_maps_unknown_values_to_done() {
+        for (i, st) in [Test::Context, Test::Writers, Test::Running, Test::Done]
+            .into_iter()
+            .enumerate()
+        {
+            assert_eq!(st.to_u8(), i as u8);
+            assert_eq!(Test::from_u8(i as u8), st);
+            assert_eq!(st.is_startup(), i < 2, "{st:?}");
+            assert_eq!(st.is_done(), i == 3, "{st:?}");
         }
-        fn from_u8(x: u8) -> Self {
-            [Test::Context, Test::Writers, Test::Running]
-                .get(x as usize)
-                .copied()
-                .unwrap_or(Test::Done)
-        }
-        fn is_startup(self) -> bool {
-            matches!(self, Test::Context | Test::Writers)
-        }
-        fn is_done(self) -> bool {
-            self == Test::Done
-        }
-        fn describe(self) -> &'static str {
-            match self {
-                Test::Context => "creating the DDS context",
-                Test::Writers => "creating the writers",
-                Test::Running => "the event loop",
-                Test::Done => "shutdown",
-            }
-        }
+        assert_eq!(Test::from_u8(200), Test::Done);
+        assert_eq!(Test::FIRST, Test::Context);
     }
 
     const fn s(x: u64) -> Duration {
