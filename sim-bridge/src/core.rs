@@ -60,6 +60,11 @@ pub struct MetricsLine {
     pub parts_delivered: u32,
     pub parts_collected: u32,
     pub collisions: u32,
+    /// `collisions` by kind (robot-steps in contact with a robot, machine, storage, wall).
+    pub collisions_robot_robot: u32,
+    pub collisions_robot_machine: u32,
+    pub collisions_robot_storage: u32,
+    pub collisions_robot_wall: u32,
     pub p_max: u32,
     pub mu: f64,
     /// Robots whose latest command answers a state at most [`ON_STATE_WINDOW_S`] old: they
@@ -395,6 +400,10 @@ impl Core {
             parts_delivered: m.parts_delivered,
             parts_collected: m.parts_collected,
             collisions: m.collisions,
+            collisions_robot_robot: m.collisions_robot_robot,
+            collisions_robot_machine: m.collisions_robot_machine,
+            collisions_robot_storage: m.collisions_robot_storage,
+            collisions_robot_wall: m.collisions_robot_wall,
             p_max: m.p_max,
             mu: m.utilization(),
             robots_on_state: self.robots_on_state(),
@@ -445,6 +454,19 @@ impl Core {
                     kv("parts_delivered", m.parts_delivered.to_string()),
                     kv("parts_collected", m.parts_collected.to_string()),
                     kv("collisions", m.collisions.to_string()),
+                    kv(
+                        "collisions_robot_robot",
+                        m.collisions_robot_robot.to_string(),
+                    ),
+                    kv(
+                        "collisions_robot_machine",
+                        m.collisions_robot_machine.to_string(),
+                    ),
+                    kv(
+                        "collisions_robot_storage",
+                        m.collisions_robot_storage.to_string(),
+                    ),
+                    kv("collisions_robot_wall", m.collisions_robot_wall.to_string()),
                     kv("machine_utilization", format!("{:.4}", m.mu)),
                     kv("p_max", m.p_max.to_string()),
                     kv("robots", m.robots.to_string()),

@@ -266,6 +266,22 @@ impl Plan {
         })
     }
 
+    /// What the robots run, for the start-up line: the checkpoint, or the scripted
+    /// controller (a `controller:=` robot parameter wins, as it does in robot_node).
+    fn controller(&self) -> String {
+        let forced = self
+            .a
+            .robot_params
+            .iter()
+            .rev()
+            .find_map(|p| p.strip_prefix("controller:="));
+        match (&self.a.policy, forced) {
+            (_, Some(c)) if c != "policy" => c.to_string(),
+            (Some(p), _) => p.display().to_string(),
+            (None, _) => "greedy".into(),
+        }
+    }
+
     /// The ROS 2 environment of a child: the fleet's domain, and the distribution a
     /// sourced ROS 2 install would set (ros2-client warns in every process without it).
     fn ros_env(&self, c: &mut Command) {
@@ -429,11 +445,7 @@ impl Fleet {
             plan.setup,
             plan.a.mode,
             plan.domain,
-            plan.a
-                .policy
-                .as_ref()
-                .map(|p| p.display().to_string())
-                .unwrap_or_else(|| "greedy".into()),
+            plan.controller(),
             plan.log_dir.display()
         );
         let (cmd_tx, commands) = std::sync::mpsc::channel::<String>();
@@ -529,7 +541,7 @@ impl Fleet {
         };
         self.health.observe(sample);
         println!(
-            "t={:>6.1}s step={:>5} robots={:>3} on_state={:>3} delivered={:>4} collected={:>4} collisions={:>4} MU={:.3} health: {}",
+            "t={:>6.1}s step={:>5} robots={:>3} on_state={:>3} delivered={:>4} collected={:>4} collisions={:>4} (robot {} machine {} storage {} wall {}) MU={:.3} health: {}",
             sample.sim_time,
             v["step"],
             v["robots"],
@@ -537,6 +549,10 @@ impl Fleet {
             v["parts_delivered"],
             v["parts_collected"],
             v["collisions"],
+            v["collisions_robot_robot"],
+            v["collisions_robot_machine"],
+            v["collisions_robot_storage"],
+            v["collisions_robot_wall"],
             v["mu"].as_f64().unwrap_or(0.0),
             self.health.status()
         );
