@@ -419,6 +419,18 @@ fn metrics(path: &std::path::Path, period: f64) -> Result<()> {
             get(&last_reported, "collisions"),
             get(&last_reported, "machine_utilization")
         );
+        // bridges before the per-kind counts recorded only the total
+        if last_reported.contains_key("collisions_robot_robot") {
+            println!(
+                "collisions by kind from /tending/metrics: robot-robot {}, robot-machine {}, robot-storage {}, robot-wall {}",
+                get(&last_reported, "collisions_robot_robot"),
+                get(&last_reported, "collisions_robot_machine"),
+                get(&last_reported, "collisions_robot_storage"),
+                get(&last_reported, "collisions_robot_wall")
+            );
+        } else {
+            println!("collisions by kind: n/a (recorded by a bridge that reported only totals)");
+        }
         if let Some(rep) = last_reported
             .get("parts_delivered")
             .and_then(|v| v.parse::<u64>().ok())

@@ -162,6 +162,13 @@ fn recorded_fleet_bag_matches_the_final_metrics() {
         l.split_whitespace().next().unwrap().parse().unwrap()
     };
     assert_eq!(grab("total from /tending/metrics: "), parts, "{text}\n{m}");
+    // contacts by kind, as the bridge reported them last
+    let kinds = text
+        .lines()
+        .find_map(|l| l.strip_prefix("collisions by kind from /tending/metrics: "))
+        .unwrap_or_else(|| panic!("no collisions by kind in:\n{text}"));
+    let rr = format!("robot-robot {}", m["collisions_robot_robot"]);
+    assert!(kinds.starts_with(&rr), "{kinds} vs {m}");
     assert_eq!(grab("total from has_part: "), parts, "{text}\n{m}");
     // every robot's cmd_vel was recorded as received
     let r = bag::BagReader::open(&dir).unwrap();
