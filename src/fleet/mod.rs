@@ -222,6 +222,9 @@ impl Plan {
         if !(a.duration.is_finite() && a.duration > 0.0) {
             bail!("--duration must be > 0");
         }
+        if a.robots_per_process == Some(0) {
+            bail!("--robots-per-process must be at least 1");
+        }
         let bridge_bin = sibling(BRIDGE)?;
         let node_bin = sibling("robot_node")?;
         if let Some(p) = &a.policy {
