@@ -61,6 +61,11 @@ pub struct TrainArgs {
     /// Stop after this many updates in this invocation (for tests and benchmarks).
     #[arg(long)]
     pub max_updates: Option<u64>,
+    /// Start the actor from this policy checkpoint (same architecture) instead of fresh
+    /// weights, e.g. to fine-tune the bundled policy behind the ORCA filter; pair with
+    /// `critic_warmup_updates` in --config. The critic starts fresh.
+    #[arg(long, conflicts_with = "resume", value_name = "CHECKPOINT")]
+    pub init_actor: Option<PathBuf>,
     /// No progress bar (log lines to stderr every update instead).
     #[arg(long)]
     pub quiet: bool,
@@ -68,7 +73,7 @@ pub struct TrainArgs {
 
 const LOG_HEADER: &str = "update,episodes,agent_steps,stage,setup,team_reward,parts_delivered,\
 collisions,mu,policy_loss,value_loss,entropy,approx_kl,clip_frac,actor_grad_norm,\
-critic_grad_norm,rollout_secs,train_secs,wall_secs,agent_steps_per_sec";
+critic_grad_norm,rollout_secs,train_secs,wall_secs,agent_steps_per_sec,contact_rate,lambda";
 
 /// `--randomize`: the range, and the episode budget when given.
 fn range_from_args(a: &TrainArgs) -> Result<Option<(SetupRange, Option<u64>)>> {
@@ -145,7 +150,7 @@ pub fn curve_from_log(lines: &[String]) -> (Vec<CurvePoint>, Vec<f64>) {
 
 fn log_line(s: &UpdateStats, wall: f64, sps: f64) -> String {
     format!(
-        "{},{},{},{},{},{:.4},{:.4},{:.4},{:.5},{:.6},{:.6},{:.6},{:.6},{:.5},{:.5},{:.5},{:.4},{:.4},{:.3},{:.1}",
+        "{},{},{},{},{},{:.4},{:.4},{:.4},{:.5},{:.6},{:.6},{:.6},{:.6},{:.5},{:.5},{:.5},{:.4},{:.4},{:.3},{:.1},{:.5},{:.4}",
         s.update,
         s.episodes,
         s.agent_steps,
@@ -165,7 +170,9 @@ fn log_line(s: &UpdateStats, wall: f64, sps: f64) -> String {
         s.rollout_secs,
         s.train_secs,
         wall,
-        sps
+        sps,
+        s.contact_rate,
+        s.lambda
     )
 }
 
@@ -249,13 +256,21 @@ pub fn run(a: TrainArgs) -> Result<()> {
             None => TrainConfig::default(),
         };
         let scenario = crate::sim_cmd::load_config(&a.scenario)?;
-        if let Some((r, eps)) = range {
+        let mut t = if let Some((r, eps)) = range {
             Trainer::new_randomized(kind, cfg, scenario, r, eps.unwrap_or(2000), a.seed)
                 .context("--randomize")?
         } else {
             let schedule = schedule.unwrap_or(parse_curriculum("6.4_2:2000")?);
             Trainer::new(kind, cfg, scenario, schedule, a.seed)?
+        };
+        if let Some(p) = &a.init_actor {
+            let pol = policy::Policy::load_expecting(p, kind)
+                .with_context(|| format!("--init-actor {}", p.display()))?;
+            t.init_actor(pol.actor())
+                .with_context(|| format!("--init-actor {}", p.display()))?;
+            t.init_actor_from = Some(p.display().to_string());
         }
+        t
     };
     let (mut lines, mut wall) = if a.resume {
         read_log(&log_path, t.update)?
@@ -309,8 +324,8 @@ pub fn run(a: TrainArgs) -> Result<()> {
         }
         write_atomic(&log_path, &body)?;
         let msg = format!(
-            "{} R {:.1} parts {:.1} coll {:.1} MU {:.2} | {:.0} agent-steps/s",
-            s.setup, s.team_reward, s.parts_delivered, s.collisions, s.mu, sps
+            "{} R {:.1} parts {:.1} coll {:.1} MU {:.2} lambda {:.2} | {:.0} agent-steps/s",
+            s.setup, s.team_reward, s.parts_delivered, s.collisions, s.mu, s.lambda, sps
         );
         pb.set_position(t.episodes.min(total));
         pb.set_message(msg.clone());

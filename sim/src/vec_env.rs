@@ -27,6 +27,8 @@ pub struct VecEnv {
     /// Metrics of the episodes that ended in the last step, by env.
     finished: Vec<Option<Metrics>>,
     rewards: Vec<f32>,
+    /// Bodies each robot touched in the last step.
+    contacts: Vec<u32>,
 }
 
 impl VecEnv {
@@ -47,6 +49,7 @@ impl VecEnv {
             .collect::<Result<Vec<_>, _>>()?;
         Ok(Self {
             rewards: vec![0.0; n_envs * setup.robots],
+            contacts: vec![0; n_envs * setup.robots],
             envs,
             base_seed: seed,
             episode: vec![0; n_envs],
@@ -80,25 +83,50 @@ impl VecEnv {
     /// ends are reset with their next episode seed, and their final metrics kept in
     /// `finished()`.
     pub fn step_actions(&mut self, actions: &[u8]) -> Result<(), SimError> {
+        self.step_with(actions, |env, a| env.step_actions(a))
+    }
+
+    /// Step every env with a velocity command (vx, vy) per robot (env-major): the path a
+    /// safety filter's output takes (`Env::step_velocities`). Same resets as
+    /// [`VecEnv::step_actions`].
+    pub fn step_velocities(&mut self, cmds: &[[f32; 2]]) -> Result<(), SimError> {
+        self.step_with(cmds, |env, c| env.step_velocities(c))
+    }
+
+    /// Bodies each robot touched in the last step (env-major, robot order): the cost a
+    /// constrained learner budgets (the same count `Metrics::collisions` sums).
+    pub fn contacts(&self) -> &[u32] {
+        &self.contacts
+    }
+
+    fn step_with<C: Sync>(
+        &mut self,
+        cmds: &[C],
+        step: impl Fn(&mut Env, &[C]) -> Result<(), SimError> + Sync,
+    ) -> Result<(), SimError> {
         let n = self.robots_per_env();
-        if actions.len() != n * self.envs.len() {
+        if cmds.len() != n * self.envs.len() {
             return Err(SimError::WrongCommandCount {
                 expected: n * self.envs.len(),
-                got: actions.len(),
+                got: cmds.len(),
             });
         }
         let base = self.base_seed;
         self.envs
             .par_iter_mut()
-            .zip(actions.par_chunks(n))
+            .zip(cmds.par_chunks(n))
             .zip(self.rewards.par_chunks_mut(n))
+            .zip(self.contacts.par_chunks_mut(n))
             .zip(self.done.par_iter_mut())
             .zip(self.finished.par_iter_mut())
             .zip(self.episode.par_iter_mut())
             .enumerate()
-            .try_for_each(|(e, (((((env, a), rew), done), fin), ep))| {
-                env.step_actions(a)?;
+            .try_for_each(|(e, ((((((env, a), rew), con), done), fin), ep))| {
+                step(env, a)?;
                 rew.copy_from_slice(env.rewards());
+                for (c, ev) in con.iter_mut().zip(env.events()) {
+                    *c = ev.collisions;
+                }
                 *done = env.is_done();
                 *fin = None;
                 if *done {

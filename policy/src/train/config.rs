@@ -56,6 +56,26 @@ pub struct TrainConfig {
     /// `tending eval --shield` and robot_node `shield:=true` use) and score them under the
     /// same masked distribution in the update. Off by default (the paper's training).
     pub shield: bool,
+    /// Pass every rollout action, as a velocity, through the ORCA safety filter
+    /// (`obs::orca::GreedyOrca::filter`, the code `tending eval --orca-filter` and
+    /// robot_node `orca_filter:=true` run) before the simulator steps: the policy learns
+    /// with the filter as part of its world. PPO still scores the discrete action.
+    pub orca_filter: bool,
+    /// Constrained PPO (PPO-Lagrangian, Ray et al. 2019, as reward shaping): hold the
+    /// contact rate (bodies touched per robot-step, all kinds) at this budget with a
+    /// Lagrange multiplier that is subtracted per contact from each robot's reward and
+    /// adapted by dual ascent after every rollout. Absent: no multiplier.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub collision_budget: Option<f32>,
+    /// Dual ascent step: the multiplier grows by `lagrange_lr x (rate - budget)` per update
+    /// (reward units per contact, per unit of contact rate).
+    pub lagrange_lr: f32,
+    /// Multiplier at the start of training.
+    pub lagrange_init: f32,
+    /// Updates at the start of the run during which only the critic learns (the actor is
+    /// frozen): for a run that starts from a trained actor (`tending train --init-actor`)
+    /// with a fresh critic, whose first advantages would be noise.
+    pub critic_warmup_updates: usize,
 }
 
 impl Default for TrainConfig {
@@ -84,6 +104,11 @@ impl Default for TrainConfig {
             mappo_max_storages: 14,
             save_every: 5,
             shield: false,
+            orca_filter: false,
+            collision_budget: None,
+            lagrange_lr: 2.0,
+            lagrange_init: 0.0,
+            critic_warmup_updates: 0,
         }
     }
 }
@@ -116,6 +141,23 @@ impl TrainConfig {
         }
         if !(self.lr > 0.0 && self.critic_lr > 0.0) {
             return Err("learning rates must be > 0".into());
+        }
+        if let Some(b) = self.collision_budget {
+            if !(b.is_finite() && b >= 0.0) {
+                return Err(format!("collision_budget must be >= 0, got {b}"));
+            }
+        }
+        if !(self.lagrange_lr.is_finite() && self.lagrange_lr >= 0.0) {
+            return Err(format!(
+                "lagrange_lr must be >= 0, got {}",
+                self.lagrange_lr
+            ));
+        }
+        if !(self.lagrange_init.is_finite() && self.lagrange_init >= 0.0) {
+            return Err(format!(
+                "lagrange_init must be >= 0, got {}",
+                self.lagrange_init
+            ));
         }
         Ok(())
     }

@@ -111,6 +111,10 @@ pub struct UpdateStats {
     pub critic_grad_norm: f32,
     pub rollout_secs: f64,
     pub train_secs: f64,
+    /// Bodies touched per robot-step in this update's rollout (all kinds).
+    pub contact_rate: f64,
+    /// Lagrange multiplier the rollout's rewards were shaped with (0 without a budget).
+    pub lambda: f32,
 }
 
 /// Rollout storage, step-major: entry `t * B + e * n + i`.
@@ -164,6 +168,9 @@ struct StateExtra {
     /// Setup range of a randomized run (absent in states saved before it existed).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     randomize: Option<String>,
+    /// Lagrange multiplier (0 in states saved before constrained training existed).
+    #[serde(default)]
+    lambda: f32,
 }
 
 pub struct Trainer {
@@ -189,6 +196,13 @@ pub struct Trainer {
     /// `Trainer::ppo`); a memory bound, not a hyper-parameter: splitting changes results
     /// only by summation order.
     pub part_rows: usize,
+    /// Lagrange multiplier on the contact rate (`TrainConfig::collision_budget`).
+    pub lambda: f32,
+    /// Checkpoint the actor started from (`Trainer::init_actor`), recorded in the policy's
+    /// metadata.
+    pub init_actor_from: Option<String>,
+    /// Contact rate of the last rollout (bodies touched per robot-step).
+    last_contact_rate: f64,
     buf: Rollout,
     mb: MiniBatch,
 }
@@ -367,6 +381,11 @@ impl Trainer {
         actor.opt.cfg.eps = cfg.opti_eps;
         critic.opt.cfg.lr = cfg.critic_lr;
         critic.opt.cfg.eps = cfg.opti_eps;
+        let lambda = if cfg.collision_budget.is_some() {
+            cfg.lagrange_init
+        } else {
+            0.0
+        };
         Ok(Self {
             kind,
             vnorm: ValueNorm::new(cfg.valuenorm_beta),
@@ -383,6 +402,9 @@ impl Trainer {
             stage_episodes: 0,
             randomize: None,
             part_rows: PART_ROWS,
+            lambda,
+            last_contact_rate: 0.0,
+            init_actor_from: None,
             buf: Rollout::default(),
             mb: MiniBatch::default(),
         })
@@ -519,6 +541,13 @@ impl Trainer {
         let mut st = self.ppo(setup)?;
         st.train_secs = t1.elapsed().as_secs_f64();
         st.rollout_secs = rollout_secs;
+        st.contact_rate = self.last_contact_rate;
+        st.lambda = self.lambda;
+        // Dual ascent on the multiplier after the rollout that used it (PPO-Lagrangian).
+        if let Some(budget) = self.cfg.collision_budget {
+            let err = self.last_contact_rate as f32 - budget;
+            self.lambda = (self.lambda + self.cfg.lagrange_lr * err).max(0.0);
+        }
 
         let e = self.cfg.n_envs as u64;
         self.update += 1;
@@ -597,6 +626,25 @@ impl Trainer {
             .shield
             .then(|| sim::baselines::shield_params(venv.envs()[0].sizes(), &self.scenario));
         let mut bias = vec![0.0f32; self.actor.arch.n_actions];
+        // One ORCA filter per robot (it keeps the positions it saw last step); rebuilt per
+        // rollout because every rollout starts fresh episodes.
+        let mut filters: Vec<obs::orca::GreedyOrca> = if cfg.orca_filter {
+            let p = sim::baselines::orca_params(venv.envs()[0].sizes(), &self.scenario);
+            let one = obs::orca::GreedyOrca::new(p).map_err(|reason| {
+                TrainError::Config(format!("orca_filter: ORCA parameters: {reason}"))
+            })?;
+            vec![one; b]
+        } else {
+            Vec::new()
+        };
+        let mut prefs = vec![[0.0f32; 2]; b];
+        let mut vels = vec![[0.0f32; 2]; b];
+        let lambda = if cfg.collision_budget.is_some() {
+            self.lambda
+        } else {
+            0.0
+        };
+        let mut contacts_total = 0u64;
         for t in 0..t_len {
             venv.observe(&mut step_obs);
             if t % l == 0 {
@@ -645,9 +693,29 @@ impl Trainer {
             }
             buf.actions.extend_from_slice(&acts);
             buf.values.extend_from_slice(&values);
-            venv.step_actions(&acts)?;
-            buf.rewards
-                .extend(venv.rewards().iter().map(|r| r * cfg.reward_scale));
+            if filters.is_empty() {
+                venv.step_actions(&acts)?;
+            } else {
+                let k_speed = self.scenario.task.k_speed;
+                for (r, f) in filters.iter_mut().enumerate() {
+                    prefs[r] = sim::action_to_velocity(acts[r], k_speed).unwrap_or([0.0, 0.0]);
+                    vels[r] = f.filter(
+                        step_obs.own_row(r),
+                        step_obs.machines_row(r),
+                        step_obs.storages_row(r),
+                        step_obs.peers_row(r),
+                        prefs[r],
+                    );
+                }
+                venv.step_velocities(&vels)?;
+            }
+            contacts_total += venv.contacts().iter().map(|&c| c as u64).sum::<u64>();
+            buf.rewards.extend(
+                venv.rewards()
+                    .iter()
+                    .zip(venv.contacts())
+                    .map(|(r, &c)| (r - lambda * c as f32) * cfg.reward_scale),
+            );
             for (ei, &d) in venv.done().iter().enumerate() {
                 for i in 0..n {
                     buf.dones.push(d);
@@ -656,6 +724,7 @@ impl Trainer {
             }
             finished.extend(venv.finished().iter().flatten().copied());
         }
+        self.last_contact_rate = contacts_total as f64 / (t_len * b).max(1) as f64;
         // bootstrap values of the state after the last step (masked by done in GAE)
         venv.observe(&mut step_obs);
         let last_raw = self
@@ -721,6 +790,9 @@ impl Trainer {
         let mut count = 0f32;
         let mut rows = vec![];
         let part_rows = part_rows_for(self.kind, setup, &cfg, self.part_rows);
+        // Critic warm-up (`critic_warmup_updates`): the actor neither computes gradients
+        // nor steps, so a trained actor is not pushed around by a fresh critic's noise.
+        let train_actor = self.update >= cfg.critic_warmup_updates as u64;
         for _ in 0..cfg.ppo_epoch {
             perm.shuffle(&mut rng);
             for mb_units in perm.chunks(per_mb) {
@@ -779,19 +851,24 @@ impl Trainer {
                     let (actor, critic, mb) = (&mut self.actor, &mut self.critic, &self.mb);
                     let (ra, rc) = rayon::join(
                         || {
-                            actor.ppo_grads_part_biased(
-                                &mb.obs,
-                                l,
-                                bu,
-                                &mb.ha,
-                                &mb.masks,
-                                &mb.actions,
-                                &mb.logp,
-                                &mb.adv,
-                                &mb.shield,
-                                pcfg,
-                                mb_rows,
-                            )
+                            if !train_actor {
+                                return Ok(None);
+                            }
+                            actor
+                                .ppo_grads_part_biased(
+                                    &mb.obs,
+                                    l,
+                                    bu,
+                                    &mb.ha,
+                                    &mb.masks,
+                                    &mb.actions,
+                                    &mb.logp,
+                                    &mb.adv,
+                                    &mb.shield,
+                                    pcfg,
+                                    mb_rows,
+                                )
+                                .map(Some)
                         },
                         || {
                             critic.value_grads_part(
@@ -801,13 +878,17 @@ impl Trainer {
                         },
                     );
                     let (sa, sc) = (ra?, rc?);
-                    st.policy_loss += sa.policy_loss;
-                    st.entropy += sa.entropy;
-                    st.approx_kl += sa.approx_kl;
-                    st.clip_frac += sa.clip_frac;
+                    if let Some(sa) = sa {
+                        st.policy_loss += sa.policy_loss;
+                        st.entropy += sa.entropy;
+                        st.approx_kl += sa.approx_kl;
+                        st.clip_frac += sa.clip_frac;
+                    }
                     st.value_loss += sc.value_loss;
                 }
-                st.actor_grad_norm += self.actor.step(cfg.max_grad_norm);
+                if train_actor {
+                    st.actor_grad_norm += self.actor.step(cfg.max_grad_norm);
+                }
                 st.critic_grad_norm += self.critic.step(cfg.max_grad_norm);
                 count += 1.0;
             }
@@ -840,10 +921,28 @@ impl Trainer {
             "updates": self.update,
             "agent_steps": self.agent_steps,
             "seed": self.seed,
+            "init_actor": self.init_actor_from,
+            "lambda": self.lambda,
             "k_speed": self.scenario.task.k_speed,
             "scenario": serde_json::to_value(&self.scenario).unwrap_or(serde_json::Value::Null),
             "train_config": serde_json::to_value(&self.cfg).unwrap_or(serde_json::Value::Null),
         })
+    }
+
+    /// Start from a trained actor (e.g. fine-tuning the bundled policy behind a safety
+    /// filter): its weights replace the fresh ones, with a fresh Adam. Refused unless its
+    /// architecture is exactly this run's.
+    pub fn init_actor(&mut self, actor: &Actor) -> Result<(), TrainError> {
+        if actor.arch != self.actor.arch {
+            return Err(TrainError::Config(format!(
+                "the initial actor's architecture {:?} differs from this run's {:?}",
+                actor.arch, self.actor.arch
+            )));
+        }
+        let mut a = actor.clone();
+        a.opt = self.actor.opt.clone();
+        self.actor = a;
+        Ok(())
     }
 
     pub fn save_policy(&self, path: &Path) -> Result<(), TrainError> {
@@ -866,6 +965,7 @@ impl Trainer {
             stage_episodes: self.stage_episodes,
             valuenorm: self.vnorm.to_bits(),
             randomize: self.randomize.map(|r| r.to_string()),
+            lambda: self.lambda,
         };
         let v = serde_json::to_value(&extra).map_err(|e| TrainError::Config(e.to_string()))?;
         save_trainer_state(path, &self.actor, &self.critic, v)?;
@@ -894,6 +994,7 @@ impl Trainer {
         t.stage = extra.stage;
         t.stage_episodes = extra.stage_episodes;
         t.vnorm = ValueNorm::from_bits(extra.valuenorm);
+        t.lambda = extra.lambda;
         if let Some(r) = &extra.randomize {
             let range: SetupRange = r.parse()?;
             Self::check_range(t.kind, &t.cfg, &t.scenario, range)?;
