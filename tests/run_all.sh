@@ -74,3 +74,24 @@ if [ ! -x "$venv_b/bin/python" ] || [ "$(cat "$stamp_b" 2>/dev/null)" != "$want_
     echo "$want_b" > "$stamp_b"
 fi
 timeout 600 "$venv_b/bin/python" -m pytest tests/bags -q -rs -p no:cacheprovider
+
+# Python: the `tending` package (python/: PyO3 + maturin) built from the checkout with
+# `pip install ./python` into its own venv (same reinstall rule for the test
+# requirements; the package itself is rebuilt every run, incrementally in the workspace
+# target dir, and without build isolation so maturin comes from the venv, not PyPI).
+# PettingZoo's API and seed tests, spaces, determinism, equality with `tending sim`.
+echo "== python package tests (python/tests)"
+venv_p="target/venv-python"
+stamp_p="$venv_p/.requirements.sha256"
+want_p="$(sha256sum python/tests/requirements.txt | cut -d' ' -f1) $("$py_sys" -c 'import sys; print(sys.version.split()[0])')"
+if [ ! -x "$venv_p/bin/python" ] || [ "$(cat "$stamp_p" 2>/dev/null)" != "$want_p" ]; then
+    rm -rf "$venv_p"
+    "$py_sys" -m venv "$venv_p"
+    "$venv_p/bin/python" -m pip install --quiet --disable-pip-version-check \
+        -r python/tests/requirements.txt
+    echo "$want_p" > "$stamp_p"
+fi
+# PATH: maturin's PEP 517 hook runs the `maturin` binary of the venv.
+PATH="$PWD/$venv_p/bin:$PATH" "$venv_p/bin/python" -m pip install --quiet \
+    --disable-pip-version-check --no-build-isolation --force-reinstall --no-deps ./python
+timeout 600 "$venv_p/bin/python" -m pytest python/tests -q -rs -p no:cacheprovider

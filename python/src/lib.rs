@@ -124,8 +124,8 @@ fn position(pos: Option<(f32, f32)>) -> Option<[f32; 2]> {
 }
 
 /// A numpy id (u32 in the simulator) from a Python int, refusing negatives clearly.
-fn body_id(kind: &str, id: i64) -> PyResult<u32> {
-    u32::try_from(id).map_err(|_| SimError::new_err(format!("{kind}: no {kind} with id {id}")))
+fn body_id(context: &str, kind: &str, id: i64) -> PyResult<u32> {
+    u32::try_from(id).map_err(|_| SimError::new_err(format!("{context}: no {kind} with id {id}")))
 }
 
 /// Four zeroed numpy arrays for `rows` observation rows with `c` entity counts, shaped
@@ -527,7 +527,7 @@ impl Sim {
             .map_err(|e| sim_err("add_robot", e))
     }
     fn remove_robot(&mut self, id: i64) -> PyResult<()> {
-        let id = body_id("robot", id)?;
+        let id = body_id("remove_robot", "robot", id)?;
         if self.env.n_robots() == 1 && self.env.robot_index(RobotId(id)).is_some() {
             // An env with no robot has no agents and nothing to observe: refuse it here
             // rather than hand PettingZoo an empty, still-running episode.
@@ -547,7 +547,7 @@ impl Sim {
             .map_err(|e| sim_err("add_machine", e))
     }
     fn remove_machine(&mut self, id: i64) -> PyResult<()> {
-        let id = body_id("machine", id)?;
+        let id = body_id("remove_machine", "machine", id)?;
         self.env
             .remove_machine(MachineId(id))
             .map_err(|e| sim_err("remove_machine", e))
@@ -560,7 +560,7 @@ impl Sim {
             .map_err(|e| sim_err("add_storage", e))
     }
     fn remove_storage(&mut self, id: i64) -> PyResult<()> {
-        let id = body_id("storage", id)?;
+        let id = body_id("remove_storage", "storage", id)?;
         self.env
             .remove_storage(StorageId(id))
             .map_err(|e| sim_err("remove_storage", e))

@@ -120,6 +120,7 @@ class TendingParallelEnv(ParallelEnv):
         self._action_spaces: dict[str, spaces.Space] = {}
         self._obs_space_cache: dict[tuple, spaces.Space] = {}
         self._needs_reset = True
+        self._departed: dict[str, object] = {}
 
     # ---- spaces -------------------------------------------------------------------------
 
@@ -166,6 +167,7 @@ class TendingParallelEnv(ParallelEnv):
         self._sim.reset(_native.episode_seed(self._base_seed, 0, self._episode))
         self._episode += 1
         self._needs_reset = False
+        self._departed = {}
         self.agents = self._agent_names()
         self.possible_agents = list(
             dict.fromkeys(self.possible_agents + self.agents)
@@ -206,6 +208,13 @@ class TendingParallelEnv(ParallelEnv):
         done = self._sim.is_done()
         terminations = {agent: False for agent in agents}
         truncations = {agent: done for agent in agents}
+        for agent, last in self._departed.items():
+            obs[agent] = last
+            rewards[agent] = 0.0
+            terminations[agent] = True
+            truncations[agent] = False
+            infos[agent] = {"removed": True}
+        self._departed = {}
         if done:
             self.agents = []
             self._needs_reset = True
@@ -226,8 +235,8 @@ class TendingParallelEnv(ParallelEnv):
 
     def add_robot(self, pos: tuple[float, float] | None = None) -> str:
         """Add a robot at ``pos`` (x, y in metres) or at a free spot drawn from the env's
-        rng; returns its agent name. It acts from the next step; call :meth:`observe` for
-        its first observation."""
+        rng; returns its agent name. It is in ``agents`` at once and needs an action in
+        the next step; :meth:`observe` gives its first observation."""
         self._check_live("add_robot")
         rid = self._sim.add_robot(_pos(pos))
         name = f"robot_{rid}"
@@ -237,11 +246,16 @@ class TendingParallelEnv(ParallelEnv):
         return name
 
     def remove_robot(self, agent: str) -> None:
-        """Remove a robot by agent name; the others keep their names and order."""
+        """Remove a robot by agent name; the others keep their names and order. The next
+        ``step`` reports it once more, terminated (PettingZoo's way for an agent to leave),
+        with its observation at removal, reward 0 and ``infos[agent]["removed"]``."""
         self._check_live("remove_robot")
         if agent not in self.agents:
             raise ValueError(f"remove_robot: {agent!r} is not an active agent")
+        # Its observation now is its last: the next step reports it terminated with it.
+        last = self._observations()[agent]
         self._sim.remove_robot(int(agent.rsplit("_", 1)[1]))
+        self._departed[agent] = last
         self.agents = self._agent_names()
 
     def add_machine(self, pos=None) -> int:
