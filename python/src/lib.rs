@@ -67,6 +67,18 @@ fn parse_setup(setup: &str) -> PyResult<Setup> {
 /// Discrete actions from any integer numpy array (uint8, int32, int64, ...), each checked
 /// to be one of 0..5 so a bad value names its position instead of wrapping around.
 fn read_actions(actions: &Bound<'_, PyAny>, expected: usize) -> PyResult<Vec<u8>> {
+    // Fast path, no numpy calls: a contiguous uint8 or int64 array (what the vector API
+    // and most policies hand in).
+    if let Ok(arr) = actions.extract::<PyReadonlyArrayDyn<'_, u8>>() {
+        if let Ok(s) = arr.as_slice() {
+            return check_actions(s.iter().map(|&a| a as i64), expected, arr.shape());
+        }
+    }
+    if let Ok(arr) = actions.extract::<PyReadonlyArrayDyn<'_, i64>>() {
+        if let Ok(s) = arr.as_slice() {
+            return check_actions(s.iter().copied(), expected, arr.shape());
+        }
+    }
     let np = actions.py().import("numpy")?;
     let arr = np.call_method1("ascontiguousarray", (actions,))?;
     let kind: String = arr.getattr("dtype")?.getattr("kind")?.extract()?;
@@ -81,16 +93,22 @@ fn read_actions(actions: &Bound<'_, PyAny>, expected: usize) -> PyResult<Vec<u8>
     let s = arr
         .as_slice()
         .map_err(|e| PyValueError::new_err(format!("actions: {e}")))?;
-    if s.len() != expected {
+    check_actions(s.iter().copied(), expected, arr.shape())
+}
+
+fn check_actions(
+    a: impl ExactSizeIterator<Item = i64>,
+    expected: usize,
+    shape: &[usize],
+) -> PyResult<Vec<u8>> {
+    if a.len() != expected {
         return Err(PyValueError::new_err(format!(
-            "actions: expected {expected} actions (one per robot), got {} (shape {:?})",
-            s.len(),
-            arr.shape()
+            "actions: expected {expected} actions (one per robot), got {} (shape {shape:?})",
+            a.len()
         )));
     }
-    s.iter()
-        .enumerate()
-        .map(|(i, &a)| {
+    a.enumerate()
+        .map(|(i, a)| {
             if (0..sim::N_ACTIONS as i64).contains(&a) {
                 Ok(a as u8)
             } else {
@@ -744,25 +762,42 @@ impl VecSim {
         let a = read_actions(actions, e_n * n)?;
         let rewards = PyArray2::<f32>::zeros(py, [e_n, n], false);
         let mut done = vec![false; e_n];
+        let obs = obs_arrays(py, &[e_n, n], self.counts);
         {
             let mut rw = rewards.readwrite();
             let rs = rw.as_slice_mut()?;
+            let (mut o, mut m, mut s, mut p) = (
+                obs.0.readwrite(),
+                obs.1.readwrite(),
+                obs.2.readwrite(),
+                obs.3.readwrite(),
+            );
+            let c = self.counts;
+            // Each env steps and writes its observation in one task: one rayon pass, its
+            // state still in cache.
+            let (co, cm, cs, cp) = (
+                chunks(o.as_slice_mut()?, n * SELF_DIM, e_n),
+                chunks(m.as_slice_mut()?, n * c.machines * MACHINE_DIM, e_n),
+                chunks(s.as_slice_mut()?, n * c.storages * STORAGE_DIM, e_n),
+                chunks(p.as_slice_mut()?, n * c.peers * PEER_DIM, e_n),
+            );
             let envs = &mut self.envs;
             py.allow_threads(|| {
                 envs.par_iter_mut()
                     .zip(a.par_chunks(n))
                     .zip(rs.par_chunks_mut(n))
                     .zip(done.par_iter_mut())
-                    .try_for_each(|(((env, a), r), d)| {
+                    .zip(co.into_par_iter().zip(cm).zip(cs).zip(cp))
+                    .try_for_each(|((((env, a), r), d), (((o, m), s), p))| {
                         env.step_actions(a)?;
                         r.copy_from_slice(env.rewards());
                         *d = env.is_done();
+                        env.observe_into(o, m, s, p);
                         Ok::<(), sim::SimError>(())
                     })
             })
             .map_err(|e| sim_err("actions", e))?;
         }
-        let obs = self.observe(py)?;
         let mut finals = None;
         let mut metrics: Vec<Option<Bound<'py, PyDict>>> = vec![None; e_n];
         if done.iter().any(|&d| d) {
