@@ -1,0 +1,27 @@
+#!/usr/bin/env bash
+# The Python package's benchmark (agent-steps/s through the Python API next to
+# `tending bench-sim`) and the RLlib example, written to docs/bench/python.md.
+# Not CI: Ray and PyTorch are a large install. Their virtualenv lives in target/venv-rllib,
+# created if missing and reinstalled only when bench/python/requirements-rllib.txt changes.
+# ITERS (default 5) sets the RLlib training iterations.
+set -euo pipefail
+cd "$(dirname "$0")/../.."
+py_sys="$(command -v python3.11 || command -v python3)"
+venv="target/venv-rllib"
+stamp="$venv/.requirements.sha256"
+want="$(sha256sum bench/python/requirements-rllib.txt | cut -d' ' -f1) $("$py_sys" -c 'import sys; print(sys.version.split()[0])')"
+if [ ! -x "$venv/bin/python" ] || [ "$(cat "$stamp" 2>/dev/null)" != "$want" ]; then
+    rm -rf "$venv"
+    "$py_sys" -m venv "$venv"
+    "$venv/bin/python" -m pip install --quiet --disable-pip-version-check \
+        -r bench/python/requirements-rllib.txt
+    echo "$want" > "$stamp"
+fi
+cargo build --release --locked -j 2 --bin tending
+PATH="$PWD/$venv/bin:$PATH" "$venv/bin/python" -m pip install --quiet \
+    --disable-pip-version-check --no-build-isolation --force-reinstall --no-deps ./python
+out="docs/bench/python.md"
+"$venv/bin/python" bench/python/bench.py --tending "${CARGO_TARGET_DIR:-target}/release/tending" \
+    --out "$out"
+"$venv/bin/python" bench/python/rllib_example.py --iters "${ITERS:-5}" --md "$out" \
+    --json docs/bench/python_rllib.json
