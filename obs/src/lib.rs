@@ -13,6 +13,7 @@
 //! that share the same entity counts, stored row-major and contiguous so networks can run
 //! one GEMM per group.
 
+pub mod action;
 mod flat;
 pub mod geom;
 pub mod greedy;

@@ -1,4 +1,4 @@
-//! A one-step safety shield over the 5 discrete actions (Alshiekh et al. 2018, "Safe
+//! A one-step safety shield over the discrete actions (Alshiekh et al. 2018, "Safe
 //! reinforcement learning via shielding", preemptive form): an action is masked when the
 //! robot's position one period ahead, moving at K_speed on that axis, would come within
 //! a margin of a body it observes (peer, machine, storage, wall) *and* closer to it than
@@ -16,8 +16,9 @@
 
 use crate::geom::{box_distance, norm};
 
-/// The 5 discrete moves (0 stay, 1 left, 2 right, 3 down, 4 up) as unit directions.
-pub const MOVES: [[f32; 2]; 5] = [[0.0, 0.0], [-1.0, 0.0], [1.0, 0.0], [0.0, -1.0], [0.0, 1.0]];
+/// The discrete moves as unit directions (the paper's 5, then 4 diagonals): the shield
+/// judges all 9, a 5-action policy's logits take the first 5.
+pub use crate::action::MOVES;
 
 /// Logit given to a masked action: far below any real logit, finite so that softmax,
 /// log-probabilities and entropy stay finite (exp underflows to exactly 0).
@@ -72,12 +73,12 @@ pub fn safe_actions(
     storages: &[f32],
     peers: &[f32],
     p: &ShieldParams,
-) -> [bool; 5] {
+) -> [bool; crate::action::N_ACTIONS_WITH_DIAGONALS] {
     let r = p.robot_radius;
     let step = p.k_speed * p.dt;
     let has_part = own[2] > 0.5;
     let pos = [own[0], own[1]];
-    let mut safe = [true; 5];
+    let mut safe = [true; crate::action::N_ACTIONS_WITH_DIAGONALS];
     for (a, mv) in MOVES.iter().enumerate().skip(1) {
         let next = [mv[0] * step, mv[1] * step];
         // Unsafe: the gap after the move is below the limit and smaller than now.
@@ -112,7 +113,7 @@ pub fn safe_actions(
 }
 
 /// Set the logits of unsafe actions to [`MASKED_LOGIT`]; returns how many were masked.
-pub fn mask_logits(logits: &mut [f32], safe: &[bool; 5]) -> usize {
+pub fn mask_logits(logits: &mut [f32], safe: &[bool]) -> usize {
     let mut n = 0;
     for (l, ok) in logits.iter_mut().zip(safe) {
         if !ok {

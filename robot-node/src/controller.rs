@@ -23,6 +23,11 @@ pub enum Action {
     Right = 2,
     Down = 3,
     Up = 4,
+    /// Diagonals (`obs::action`, policies trained with `diagonal_actions`).
+    LeftDown = 5,
+    RightDown = 6,
+    LeftUp = 7,
+    RightUp = 8,
 }
 
 impl Action {
@@ -33,20 +38,20 @@ impl Action {
             2 => Action::Right,
             3 => Action::Down,
             4 => Action::Up,
+            5 => Action::LeftDown,
+            6 => Action::RightDown,
+            7 => Action::LeftUp,
+            8 => Action::RightUp,
             _ => return None,
         })
     }
 }
 
-/// Velocity (vx, vy) of an action: left = -x, right = +x, down = -y, up = +y.
+/// Velocity (vx, vy) of an action: left = -x, right = +x, down = -y, up = +y, diagonals
+/// at the same speed; the table the simulator steps with (`obs::action`).
 pub fn action_velocity(a: Action, k_speed: f32) -> [f32; 2] {
-    match a {
-        Action::Stay => [0.0, 0.0],
-        Action::Left => [-k_speed, 0.0],
-        Action::Right => [k_speed, 0.0],
-        Action::Down => [0.0, -k_speed],
-        Action::Up => [0.0, k_speed],
-    }
+    let m = obs::action::MOVES[a as usize];
+    [m[0] * k_speed, m[1] * k_speed]
 }
 
 /// Something that turns one robot's observation (a single-row batch) into a velocity.

@@ -143,13 +143,11 @@ impl GreedyOrcaFleet {
     }
 }
 
-/// Apply the shield to every row of `logits` (rows x N_ACTIONS) from the rows of `obs`.
+/// Apply the shield to every row of `logits` (rows x actions: 5, or 9 with diagonals)
+/// from the rows of `obs`.
 pub fn shield_logits(obs: &ObsBatch, logits: &mut [f32], p: &ShieldParams) {
-    for (r, row) in logits
-        .chunks_exact_mut(N_ACTIONS)
-        .enumerate()
-        .take(obs.rows)
-    {
+    let k = logits.len() / obs.rows.max(1);
+    for (r, row) in logits.chunks_exact_mut(k.max(1)).enumerate().take(obs.rows) {
         let safe = obs::shield::safe_actions(
             obs.own_row(r),
             obs.machines_row(r),

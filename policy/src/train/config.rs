@@ -76,6 +76,10 @@ pub struct TrainConfig {
     /// frozen): for a run that starts from a trained actor (`tending train --init-actor`)
     /// with a fresh critic, whose first advantages would be noise.
     pub critic_warmup_updates: usize,
+    /// 9 actions instead of the paper's 5: the 4 diagonals at the same speed
+    /// (`obs::action`). Axis moves only make a robot travel |dx| + |dy|, 1.27x the straight
+    /// distance on average, which the continuous-velocity baseline does not pay.
+    pub diagonal_actions: bool,
 }
 
 impl Default for TrainConfig {
@@ -109,6 +113,7 @@ impl Default for TrainConfig {
             lagrange_lr: 2.0,
             lagrange_init: 0.0,
             critic_warmup_updates: 0,
+            diagonal_actions: false,
         }
     }
 }

@@ -659,3 +659,38 @@ fn critic_warmup_freezes_the_actor_and_init_actor_checks_shapes() {
     let err = t.init_actor(&mappo.actor).unwrap_err().to_string();
     assert!(err.contains("architecture"), "{err}");
 }
+
+/// `diagonal_actions = true`: a 9-action actor that trains, saves, loads and evaluates
+/// (with and without the shield), and whose sampled rollouts use the diagonals.
+#[test]
+fn diagonal_actions_train_and_evaluate() {
+    let mut t = crowded(TrainConfig {
+        diagonal_actions: true,
+        ..TrainConfig::default()
+    });
+    assert_eq!(t.actor.arch.n_actions, 9);
+    let s = t.step().unwrap();
+    assert!(
+        s.policy_loss.is_finite() && s.entropy > 1.5,
+        "entropy of ~9 actions: {s:?}"
+    );
+    let p = tmp("diag.safetensors");
+    t.save_policy(&p).unwrap();
+    let pol = crate::Policy::load(&p).unwrap();
+    assert_eq!(pol.actor().arch.n_actions, 9);
+    let mut sc = ScenarioConfig::default();
+    sc.world.episode_steps = 40;
+    for ctrl in [
+        Controller::Learned {
+            actor: Box::new(pol.actor().clone()),
+            sample: true,
+        },
+        Controller::Shielded {
+            actor: Box::new(pol.actor().clone()),
+            sample: true,
+        },
+    ] {
+        let m = run_episode(&ctrl, &sc, Setup::new(16, 4, 2), 0, 0).unwrap();
+        assert_eq!(m.steps, 40);
+    }
+}

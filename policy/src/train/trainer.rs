@@ -473,7 +473,7 @@ impl Trainer {
         cfg: &TrainConfig,
         schedule: &[Stage],
     ) -> Result<(ArchConfig, ArchConfig), TrainError> {
-        Ok(match kind {
+        let (mut actor, critic) = match kind {
             ModelKind::Smappo => (ArchConfig::smappo(), ArchConfig::smappo()),
             ModelKind::Mappo => {
                 let flat = FlatLayout {
@@ -504,7 +504,11 @@ impl Trainer {
                     ArchConfig::mappo(flat, max_robots),
                 )
             }
-        })
+        };
+        if cfg.diagonal_actions {
+            actor.n_actions = obs::action::N_ACTIONS_WITH_DIAGONALS;
+        }
+        Ok((actor, critic))
     }
 
     pub fn total_episodes(&self) -> u64 {
