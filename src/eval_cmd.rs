@@ -38,6 +38,11 @@ pub struct EvalArgs {
     /// (obs::orca): continuous velocity commands.
     #[arg(long, requires = "checkpoint", conflicts_with = "shield")]
     pub orca_filter: bool,
+    /// Run a checkpoint trained behind the ORCA filter without it (by default such a
+    /// checkpoint is evaluated behind the filter, as it was trained and as robot_node
+    /// runs it).
+    #[arg(long, requires = "checkpoint", conflicts_with = "orca_filter")]
+    pub no_orca_filter: bool,
     /// Scenario config (TOML); default: the simulator's defaults.
     #[arg(long)]
     pub scenario: Option<PathBuf>,
@@ -50,12 +55,14 @@ pub fn run(a: EvalArgs) -> Result<()> {
     let (ctrl, label) = match (&a.checkpoint, a.policy.as_deref()) {
         (Some(p), None) => {
             let pol = Policy::load(p).with_context(|| format!("load {}", p.display()))?;
+            let orca_filter =
+                a.orca_filter || (pol.trained_with_orca_filter() && !a.shield && !a.no_orca_filter);
             let label = format!(
                 "{}{} ({})",
                 pol.kind(),
                 if a.shield {
                     "+shield"
-                } else if a.orca_filter {
+                } else if orca_filter {
                     "+orca"
                 } else {
                     ""
@@ -68,7 +75,7 @@ pub fn run(a: EvalArgs) -> Result<()> {
             let sample = a.sample;
             let ctrl = if a.shield {
                 Controller::Shielded { actor, sample }
-            } else if a.orca_filter {
+            } else if orca_filter {
                 Controller::Filtered { actor, sample }
             } else {
                 Controller::Learned { actor, sample }

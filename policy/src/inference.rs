@@ -77,6 +77,18 @@ impl Policy {
         &self.actor
     }
 
+    /// Whether the checkpoint was trained with the ORCA safety filter in its action path
+    /// (`train_config.orca_filter` in its training metadata): such a policy learned with
+    /// the filter as part of its world, so evaluation and robot_node run it behind the
+    /// filter unless told otherwise.
+    pub fn trained_with_orca_filter(&self) -> bool {
+        self.meta
+            .training
+            .pointer("/train_config/orca_filter")
+            .and_then(|v| v.as_bool())
+            .unwrap_or(false)
+    }
+
     pub fn new_state(&self) -> PolicyState {
         PolicyState {
             h: vec![0.0; self.actor.hidden()],

@@ -189,6 +189,12 @@ impl PolicyController {
         }
     }
 
+    /// Whether the checkpoint was trained behind the ORCA filter (then it runs behind it
+    /// unless `-p orca_filter:=false`).
+    pub fn trained_with_orca_filter(&self) -> bool {
+        self.policy.trained_with_orca_filter()
+    }
+
     /// Pass the policy's velocity through ORCA as a safety filter ([`GreedyOrca::filter`],
     /// the code `tending eval --orca-filter` runs); its k_speed is set to the policy's.
     pub fn with_orca_filter(mut self, mut params: OrcaParams) -> anyhow::Result<Self> {

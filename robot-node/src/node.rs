@@ -56,8 +56,17 @@ pub fn make_controller(p: &Params) -> anyhow::Result<(Box<dyn Controller>, f64)>
             if p.shield {
                 c = c.with_shield(crate::controller::shield_params(p));
             }
-            if p.orca_filter {
+            // As trained, unless told otherwise; the shield replaces the default filter
+            // (the rule `tending eval` follows, so lockstep runs reproduce it).
+            let trained = c.trained_with_orca_filter();
+            if p.orca_filter.unwrap_or(trained && !p.shield) {
                 c = c.with_orca_filter(crate::controller::orca_params(p))?;
+            } else if trained {
+                tracing::warn!(
+                    "policy {} was trained behind the ORCA filter; running it without \
+                     (orca_filter:=false) changes what it learned on",
+                    path.display()
+                );
             }
             let k = c.k_speed as f64;
             info!(

@@ -1,0 +1,36 @@
+#!/usr/bin/env bash
+# Issue 10's evaluation: every method on every setup the targets name (6.4_2, the paper's
+# Table III, 100.16_2), argmax, 3 seeds x 50 episodes, then the target table and the
+# Pareto plot. Usage: bench/safety/eval_all.sh [method ...] (default: all of them).
+# Methods: greedy, greedy-orca, smappo, smappo-orca, smappo-shield (the bundled 5-action
+# policy as before), and any NAME=CHECKPOINT[:orca|:shield] for a new checkpoint.
+set -euo pipefail
+cd "$(dirname "$0")/../.."
+bin="${TENDING_BIN:-target/release/tending}"
+setups="${SETUPS:-2.2_2,4.2_2,6.4_2,12.8_4,18.12_6,24.16_8,30.20_10,36.24_12,42.28_14,100.16_2}"
+out="${OUT:-docs/safety/eval}"
+old="${OLD_CKPT:-policy/pretrained/smappo_6.4_2.safetensors}"
+methods=("$@")
+[ ${#methods[@]} -gt 0 ] || methods=(greedy greedy-orca smappo smappo-orca smappo-shield)
+for m in "${methods[@]}"; do
+    case "$m" in
+        greedy|greedy-orca) args=(--policy "$m") ;;
+        smappo) args=(--checkpoint "$old") ;;
+        smappo-orca) args=(--checkpoint "$old" --orca-filter) ;;
+        smappo-shield) args=(--checkpoint "$old" --shield) ;;
+        *=*)
+            name="${m%%=*}"; spec="${m#*=}"; ck="${spec%%:*}"
+            case "$spec" in
+                *:orca) args=(--checkpoint "$ck" --orca-filter) ;;
+                *:shield) args=(--checkpoint "$ck" --shield) ;;
+                *) args=(--checkpoint "$ck") ;;
+            esac
+            m="$name" ;;
+        *) echo "unknown method $m" >&2; exit 2 ;;
+    esac
+    echo "== $m: ${args[*]}"
+    "$bin" eval "${args[@]}" --setups "$setups" --episodes 50 --seeds 0,1,2 --out "$out/$m"
+done
+python3 bench/safety/targets.py "$out" > docs/safety/targets.md
+"$bin" plot pareto "$out"/*/results.csv --out docs/safety/pareto.png
+echo "wrote docs/safety/targets.md and docs/safety/pareto.png"

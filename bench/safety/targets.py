@@ -1,0 +1,75 @@
+#!/usr/bin/env python3
+"""Issue 10's targets, checked from `tending eval --out` results: for every setup and
+every learned method, parts vs the best scripted baseline (greedy, greedy-orca), contact
+steps vs the scripted baseline with the fewest, robot-robot contacts per robot-step.
+
+Usage: targets.py DIR  (DIR/<method>/results.csv, one row per setup and seed).
+Prints Markdown. Standard library only."""
+import csv
+import sys
+from collections import defaultdict
+from pathlib import Path
+from statistics import mean
+
+SCRIPTS = ("greedy", "greedy-orca")
+
+
+def setup_key(s):
+    n, rest = s.split(".", 1)
+    m, k = rest.split("_")
+    return (int(n), int(m), int(k))
+
+
+def main(root):
+    rows = defaultdict(lambda: defaultdict(list))  # method -> setup -> [row]
+    for f in sorted(Path(root).glob("*/results.csv")):
+        method = f.parent.name
+        with open(f) as fh:
+            for r in csv.DictReader(fh):
+                rows[method][r["setup"]].append(r)
+    if not all(s in rows for s in SCRIPTS):
+        sys.exit(f"{root}: need results of {', '.join(SCRIPTS)}")
+
+    def m(method, setup, col):
+        return mean(float(r[col]) for r in rows[method][setup])
+
+    learned = [x for x in rows if x not in SCRIPTS]
+    setups = sorted({s for x in rows.values() for s in x}, key=setup_key)
+    print("| setup | method | parts | x best script | contacts | fewest script | "
+          "robot-robot / robot-step | targets met |")
+    print("|---|---|---|---|---|---|---|---|")
+    met = defaultdict(int)
+    counted = defaultdict(int)
+    for s in setups:
+        if not all(s in rows[x] for x in SCRIPTS):
+            continue
+        best = max(m(x, s, "parts_delivered") for x in SCRIPTS)
+        fewest = min(m(x, s, "collisions") for x in SCRIPTS)
+        for x in SCRIPTS:
+            print(f"| {s} | {x} | {m(x, s, 'parts_delivered'):.1f} | "
+                  f"{m(x, s, 'parts_delivered') / best:.2f} | {m(x, s, 'collisions'):.1f} | "
+                  f"{fewest:.1f} | {m(x, s, 'robot_robot_per_robot_step'):.4f} | script |")
+        for x in learned:
+            if s not in rows[x]:
+                continue
+            parts = m(x, s, "parts_delivered")
+            contacts = m(x, s, "collisions")
+            rr = m(x, s, "robot_robot_per_robot_step")
+            ok = [parts >= 1.1 * best, contacts <= fewest, rr <= 0.01]
+            counted[x] += 1
+            met[x] += all(ok)
+            marks = "".join("y" if o else "n" for o in ok)
+            print(f"| {s} | {x} | {parts:.1f} | {parts / best:.2f} | {contacts:.1f} | "
+                  f"{fewest:.1f} | {rr:.4f} | {marks} |")
+    print()
+    print("targets met = parts >= 1.1x best script / contacts <= fewest script / "
+          "robot-robot <= 0.01 per robot-step (y or n each).")
+    print()
+    for x in learned:
+        print(f"- {x}: all three targets met on {met[x]} of {counted[x]} setups")
+
+
+if __name__ == "__main__":
+    if len(sys.argv) != 2:
+        sys.exit(__doc__)
+    main(sys.argv[1])
