@@ -134,7 +134,6 @@ pub fn run_watched(
     wd: &Watchdog,
 ) -> anyhow::Result<MetricsLine> {
     let t0 = Instant::now();
-    let now_s = || t0.elapsed().as_secs_f64();
     wd.stage(Stage::Core);
     let mut core = Core::new(p.clone(), 0.0)?;
     wd.stage(Stage::Context);
@@ -155,7 +154,7 @@ pub fn run_watched(
                 warn!("spinner stopped with error: {e:?}");
             }
         })?;
-    let r = event_loop(&p, stop, &ctx, &mut node, &mut core, &now_s, wd);
+    let r = event_loop(&p, stop, &ctx, &mut node, &mut core, t0, wd);
     wd.stage(Stage::Done);
     drop(node);
     let _ = spin_thread.join();
@@ -168,188 +167,127 @@ fn event_loop(
     ctx: &Context,
     node: &mut Node,
     core: &mut Core,
-    now_s: &dyn Fn() -> f64,
+    t0: Instant,
     wd: &Watchdog,
 ) -> anyhow::Result<MetricsLine> {
-    wd.stage(Stage::Endpoints);
-    let clock_pub: Publisher<Clock> = publisher(node, topics::CLOCK, Profile::Clock)?;
-    let markers_pub: Publisher<MarkerArray> =
-        publisher(node, topics::MARKERS, Profile::Visualization)?;
-    let metrics_pub: Publisher<DiagnosticArray> =
-        publisher(node, topics::METRICS, Profile::Visualization)?;
-
-    let mut poll = Poll::new().context("mio poll")?;
-    let mut events = Events::with_capacity(256);
-    let mut command_sub: Subscription<StdString> =
-        subscription(node, topics::COMMAND, Profile::RobotStream)?;
-    poll.registry()
-        .register(&mut command_sub, COMMAND_TOKEN, Interest::READABLE)?;
-
-    let mut rec: Option<Recorder> = match &p.record {
-        Some(dir) => {
-            let w = bag::BagWriter::create(dir)
-                .with_context(|| format!("creating the bag {}", dir.display()))?;
-            info!("recording into {}", dir.display());
-            Some(Recorder { w, errors: 0 })
+    let mut b = Bridge::new(p, ctx, node, core, t0, wd)?;
+    wd.stage(Stage::Running);
+    while !stop.load(Ordering::SeqCst) {
+        wd.beat();
+        b.wait()?;
+        let t = b.now_s();
+        b.take_commands(t);
+        b.discover();
+        match p.mode {
+            Mode::Realtime => b.step_realtime(t)?,
+            Mode::Lockstep => b.step_lockstep(t)?,
         }
-        None => None,
-    };
-    let stdin_rx = p.stdin_commands.then(stdin_lines);
-    // test_cmd_delay_ms: received commands waiting to reach the core
-    let mut delayed: DelayQueue<(String, Twist, Option<i64>)> =
-        DelayQueue::new(p.test_cmd_delay_ms);
-    // test_state_delay_ms: state frames waiting to be published
-    let mut state_q: DelayQueue<StateFrame> = DelayQueue::new(p.test_state_delay_ms);
-    if delayed.is_active() || state_q.is_active() {
-        warn!(
-            "fault injection: cmd_vel held {} ms, state held {} ms",
-            p.test_cmd_delay_ms, p.test_state_delay_ms
-        );
+        b.send_due_frames();
+        if b.core.done() {
+            break;
+        }
+        b.metrics();
+        b.flush_bag();
+    }
+    Ok(b.shutdown())
+}
+
+/// The bridge's outgoing endpoints: the fixed publishers and one writer (or two) per
+/// entity, created and dropped as entities come and go.
+struct Outputs {
+    clock: Publisher<Clock>,
+    markers: Publisher<MarkerArray>,
+    metrics: Publisher<DiagnosticArray>,
+    robots: BTreeMap<String, EntityWriters>,
+    machines: HashMap<u32, EntityWriters>,
+    storages: HashMap<u32, EntityWriters>,
+}
+
+/// A writer on an entity's topic.
+fn entity_writer<M: RosMessage>(
+    ctx: &Context,
+    node: &Node,
+    topic: topics::EntityTopic,
+    profile: Profile,
+) -> anyhow::Result<StampedWriter<M>> {
+    StampedWriter::new(ctx, node, &topic.ros_name(), profile).map_err(|e| anyhow!(e))
+}
+
+impl Outputs {
+    fn new(node: &mut Node) -> anyhow::Result<Self> {
+        Ok(Self {
+            clock: publisher(node, topics::CLOCK, Profile::Clock)?,
+            markers: publisher(node, topics::MARKERS, Profile::Visualization)?,
+            metrics: publisher(node, topics::METRICS, Profile::Visualization)?,
+            robots: BTreeMap::new(),
+            machines: HashMap::new(),
+            storages: HashMap::new(),
+        })
     }
 
-    let mut cmd_subs: Vec<(String, Subscription<Twist>)> = Vec::new();
-    let mut robots_w: BTreeMap<String, EntityWriters> = BTreeMap::new();
-    let mut machines_w: HashMap<u32, EntityWriters> = HashMap::new();
-    let mut storages_w: HashMap<u32, EntityWriters> = HashMap::new();
-
-    let subscribe_cmd = |node: &mut Node,
-                         poll: &Poll,
-                         subs: &mut Vec<(String, Subscription<Twist>)>,
-                         name: &str|
-     -> anyhow::Result<()> {
-        if subs.iter().any(|(n, _)| n == name) {
-            return Ok(());
-        }
-        wd.beat(); // start-up progress: one reader per robot
-        let mut s: Subscription<Twist> = subscription(
-            node,
-            &robot(name, Leaf::CmdVel).ros_name(),
-            Profile::RobotStream,
-        )?;
-        poll.registry()
-            .register(&mut s, Token(subs.len()), Interest::READABLE)?;
-        subs.push((name.to_string(), s));
-        Ok(())
-    };
-    let initial: Vec<String> = core.robot_names().cloned().collect();
-    for n in &initial {
-        subscribe_cmd(node, &poll, &mut cmd_subs, n)?;
-    }
-
-    // Build the current state of every entity (creating/dropping writers as entities come
-    // and go; with `send` false only the writers); `send_frame` publishes a frame: entity
-    // topics, then markers, metrics and /clock last.
-    let prepare_state = |core: &Core,
-                         node: &Node,
-                         robots_w: &mut BTreeMap<String, EntityWriters>,
-                         machines_w: &mut HashMap<u32, EntityWriters>,
-                         storages_w: &mut HashMap<u32, EntityWriters>,
-                         send: bool|
-     -> anyhow::Result<Option<StateFrame>> {
-        let stamp = core.stamp();
-        let ns = stamp.sec as i64 * 1_000_000_000 + stamp.nanosec as i64;
-        let pose =
-            |c: [f32; 2]| PoseStamped::planar(stamp, topics::FRAME_ID, c[0] as f64, c[1] as f64);
+    /// Create the writers of entities that appeared, drop those of entities that left.
+    fn sync(
+        &mut self,
+        ctx: &Context,
+        node: &Node,
+        core: &Core,
+        wd: &Watchdog,
+    ) -> anyhow::Result<()> {
         let states = core.robot_states();
-        robots_w.retain(|n, _| states.iter().any(|s| &s.0 == n));
+        self.robots.retain(|n, _| states.iter().any(|s| &s.0 == n));
         for (name, _, _) in &states {
-            if !robots_w.contains_key(name) {
+            if !self.robots.contains_key(name) {
                 wd.beat(); // progress while creating many writers (100 robots at start-up)
                 let w = EntityWriters {
-                    pose: StampedWriter::new(
+                    pose: entity_writer(ctx, node, robot(name, Leaf::Pose), Profile::RobotStream)?,
+                    flag: Some(entity_writer(
                         ctx,
                         node,
-                        &robot(name, Leaf::Pose).ros_name(),
+                        robot(name, Leaf::HasPart),
                         Profile::RobotStream,
-                    )
-                    .map_err(|e| anyhow!(e))?,
-                    flag: Some(
-                        StampedWriter::new(
-                            ctx,
-                            node,
-                            &robot(name, Leaf::HasPart).ros_name(),
-                            Profile::RobotStream,
-                        )
-                        .map_err(|e| anyhow!(e))?,
-                    ),
+                    )?),
                 };
-                robots_w.insert(name.clone(), w);
+                self.robots.insert(name.clone(), w);
             }
         }
-        let ms: Vec<_> = core.env.machines().collect();
-        machines_w.retain(|j, _| ms.iter().any(|m| m.id.0 == *j));
-        for m in &ms {
-            let j = m.id.0;
-            if !machines_w.contains_key(&j) {
+        let ms: Vec<u32> = core.env.machines().map(|m| m.id.0).collect();
+        self.machines.retain(|j, _| ms.contains(j));
+        for &j in &ms {
+            if !self.machines.contains_key(&j) {
                 wd.beat();
                 let w = EntityWriters {
-                    pose: StampedWriter::new(
+                    pose: entity_writer(ctx, node, machine(j, Leaf::Pose), Profile::LatchedPose)?,
+                    flag: Some(entity_writer(
                         ctx,
                         node,
-                        &machine(j, Leaf::Pose).ros_name(),
-                        Profile::LatchedPose,
-                    )
-                    .map_err(|e| anyhow!(e))?,
-                    flag: Some(
-                        StampedWriter::new(
-                            ctx,
-                            node,
-                            &machine(j, Leaf::PartReady).ros_name(),
-                            Profile::PartReady,
-                        )
-                        .map_err(|e| anyhow!(e))?,
-                    ),
+                        machine(j, Leaf::PartReady),
+                        Profile::PartReady,
+                    )?),
                 };
-                machines_w.insert(j, w);
+                self.machines.insert(j, w);
             }
         }
-        let ss: Vec<_> = core.env.storages().collect();
-        storages_w.retain(|k, _| ss.iter().any(|s| s.id.0 == *k));
-        for s in &ss {
-            let k = s.id.0;
-            if !storages_w.contains_key(&k) {
+        let ss: Vec<u32> = core.env.storages().map(|s| s.id.0).collect();
+        self.storages.retain(|k, _| ss.contains(k));
+        for &k in &ss {
+            if !self.storages.contains_key(&k) {
                 wd.beat();
                 let w = EntityWriters {
-                    pose: StampedWriter::new(
-                        ctx,
-                        node,
-                        &storage(k, Leaf::Pose).ros_name(),
-                        Profile::LatchedPose,
-                    )
-                    .map_err(|e| anyhow!(e))?,
+                    pose: entity_writer(ctx, node, storage(k, Leaf::Pose), Profile::LatchedPose)?,
                     flag: None,
                 };
-                storages_w.insert(k, w);
+                self.storages.insert(k, w);
             }
         }
-        if !send {
-            return Ok(None);
-        }
-        Ok(Some(StateFrame {
-            ns,
-            robots: states
-                .iter()
-                .map(|(n, pos, has)| (n.clone(), pose(*pos), *has))
-                .collect(),
-            machines: ms
-                .iter()
-                .map(|m| (m.id.0, pose(m.centre), m.part_ready))
-                .collect(),
-            storages: ss.iter().map(|s| (s.id.0, pose(s.centre))).collect(),
-            markers: core.markers(),
-            diag: core.diagnostics(),
-            clock: Clock { clock: stamp },
-        }))
-    };
-    // An entity removed while its frame was held has no writer any more: skipped.
-    let send_frame = |f: StateFrame,
-                      robots_w: &BTreeMap<String, EntityWriters>,
-                      machines_w: &HashMap<u32, EntityWriters>,
-                      storages_w: &HashMap<u32, EntityWriters>,
-                      rec: &mut Option<Recorder>| {
+        Ok(())
+    }
+
+    /// Publish a frame: entity topics, then markers, metrics and /clock last. An entity
+    /// removed while its frame was held has no writer any more: skipped.
+    fn send(&self, f: StateFrame, rec: &mut Option<Recorder>) {
         let ns = f.ns;
         for (name, ps, has_part) in f.robots {
-            let Some(w) = robots_w.get(&name) else {
+            let Some(w) = self.robots.get(&name) else {
                 continue;
             };
             // flag first, then the pose (robot nodes key everything on the stamp anyway)
@@ -366,7 +304,7 @@ fn event_loop(
             let _ = w.pose.write(ps, Some(ns));
         }
         for (j, ps, ready) in f.machines {
-            let Some(w) = machines_w.get(&j) else {
+            let Some(w) = self.machines.get(&j) else {
                 continue;
             };
             if let Some(fl) = &w.flag {
@@ -382,7 +320,7 @@ fn event_loop(
             let _ = w.pose.write(ps, Some(ns));
         }
         for (k, ps) in f.storages {
-            let Some(w) = storages_w.get(&k) else {
+            let Some(w) = self.storages.get(&k) else {
                 continue;
             };
             if let Some(r) = rec.as_mut() {
@@ -395,278 +333,415 @@ fn event_loop(
             r.put(topics::METRICS, &f.diag);
             r.put(topics::CLOCK, &f.clock);
         }
-        let _ = markers_pub.publish(f.markers);
-        let _ = metrics_pub.publish(f.diag);
-        let _ = clock_pub.publish(f.clock);
-    };
-    // Build the state and publish it now, or hold it (test_state_delay_ms).
-    #[allow(clippy::too_many_arguments)]
-    let publish_state = |core: &Core,
-                         node: &Node,
-                         robots_w: &mut BTreeMap<String, EntityWriters>,
-                         machines_w: &mut HashMap<u32, EntityWriters>,
-                         storages_w: &mut HashMap<u32, EntityWriters>,
-                         rec: &mut Option<Recorder>,
-                         state_q: &mut DelayQueue<StateFrame>,
-                         send: bool|
-     -> anyhow::Result<()> {
-        if let Some(f) = prepare_state(core, node, robots_w, machines_w, storages_w, send)? {
-            if state_q.is_active() {
-                state_q.push(Instant::now(), f);
-            } else {
-                send_frame(f, robots_w, machines_w, storages_w, rec);
+        let _ = self.markers.publish(f.markers);
+        let _ = self.metrics.publish(f.diag);
+        let _ = self.clock.publish(f.clock);
+    }
+}
+
+impl StateFrame {
+    /// The current state of every entity, stamped with the core's sim time.
+    fn of(core: &Core) -> Self {
+        let stamp = core.stamp();
+        let ns = stamp.sec as i64 * 1_000_000_000 + stamp.nanosec as i64;
+        let pose =
+            |c: [f32; 2]| PoseStamped::planar(stamp, topics::FRAME_ID, c[0] as f64, c[1] as f64);
+        StateFrame {
+            ns,
+            robots: core
+                .robot_states()
+                .into_iter()
+                .map(|(n, pos, has)| (n, pose(pos), has))
+                .collect(),
+            machines: core
+                .env
+                .machines()
+                .map(|m| (m.id.0, pose(m.centre), m.part_ready))
+                .collect(),
+            storages: core
+                .env
+                .storages()
+                .map(|s| (s.id.0, pose(s.centre)))
+                .collect(),
+            markers: core.markers(),
+            diag: core.diagnostics(),
+            clock: Clock { clock: stamp },
+        }
+    }
+}
+
+fn print_metrics(m: &MetricsLine) {
+    if let Ok(s) = serde_json::to_string(m) {
+        println!("{s}");
+    }
+}
+
+/// The step loop's state: the core, the endpoints, the fault-injection queues and the
+/// deadlines of each phase.
+struct Bridge<'a> {
+    p: &'a BridgeParams,
+    ctx: &'a Context,
+    node: &'a mut Node,
+    core: &'a mut Core,
+    wd: &'a Watchdog,
+    /// Sim-bridge start: the core's clock (`now_s`) counts from here.
+    t0: Instant,
+    poll: Poll,
+    events: Events,
+    command_sub: Subscription<StdString>,
+    cmd_subs: Vec<(String, Subscription<Twist>)>,
+    out: Outputs,
+    rec: Option<Recorder>,
+    stdin_rx: Option<std::sync::mpsc::Receiver<String>>,
+    /// test_cmd_delay_ms: received commands waiting to reach the core.
+    delayed: DelayQueue<(String, Twist, Option<i64>)>,
+    /// test_state_delay_ms: state frames waiting to be published.
+    state_q: DelayQueue<StateFrame>,
+    /// The robots of the setup: lockstep starts once all their cmd_vel are discovered.
+    initial: Vec<String>,
+    period: Duration,
+    next_tick: Instant,
+    next_discovery: Instant,
+    metrics_period: Duration,
+    next_metrics: Instant,
+    /// Lockstep start: when every initial robot's cmd_vel was discovered (+ settle).
+    all_discovered_at: Option<Instant>,
+    started: bool,
+}
+
+impl<'a> Bridge<'a> {
+    /// Start-up: the fixed endpoints, a cmd_vel reader per initial robot, the recorder,
+    /// and every entity's writers (with the first state in real time).
+    fn new(
+        p: &'a BridgeParams,
+        ctx: &'a Context,
+        node: &'a mut Node,
+        core: &'a mut Core,
+        t0: Instant,
+        wd: &'a Watchdog,
+    ) -> anyhow::Result<Self> {
+        wd.stage(Stage::Endpoints);
+        let out = Outputs::new(node)?;
+        let poll = Poll::new().context("mio poll")?;
+        let mut command_sub: Subscription<StdString> =
+            subscription(node, topics::COMMAND, Profile::RobotStream)?;
+        poll.registry()
+            .register(&mut command_sub, COMMAND_TOKEN, Interest::READABLE)?;
+        let rec = match &p.record {
+            Some(dir) => {
+                let w = bag::BagWriter::create(dir)
+                    .with_context(|| format!("creating the bag {}", dir.display()))?;
+                info!("recording into {}", dir.display());
+                Some(Recorder { w, errors: 0 })
             }
+            None => None,
+        };
+        let delayed = DelayQueue::new(p.test_cmd_delay_ms);
+        let state_q = DelayQueue::new(p.test_state_delay_ms);
+        if delayed.is_active() || state_q.is_active() {
+            warn!(
+                "fault injection: cmd_vel held {} ms, state held {} ms",
+                p.test_cmd_delay_ms, p.test_state_delay_ms
+            );
+        }
+        let initial: Vec<String> = core.robot_names().cloned().collect();
+        let t_start = Instant::now(); // placeholder, set below
+        let metrics_period = Duration::from_secs_f64(p.metrics_period_s);
+        let mut b = Bridge {
+            p,
+            ctx,
+            node,
+            core,
+            wd,
+            t0,
+            poll,
+            events: Events::with_capacity(256),
+            command_sub,
+            cmd_subs: Vec::new(),
+            out,
+            rec,
+            stdin_rx: p.stdin_commands.then(stdin_lines),
+            delayed,
+            state_q,
+            all_discovered_at: None,
+            initial,
+            period: Duration::from_secs_f64(1.0 / p.rate_hz),
+            next_tick: t_start,
+            next_discovery: t_start,
+            metrics_period,
+            next_metrics: t_start + metrics_period,
+            started: p.mode == Mode::Realtime,
+        };
+        for n in b.initial.clone() {
+            b.subscribe_cmd(&n)?;
+        }
+        // the loop's clocks start once the readers exist
+        let t_start = Instant::now();
+        b.next_tick = t_start;
+        b.next_discovery = t_start;
+        b.next_metrics = t_start + metrics_period;
+        if b.initial.is_empty() {
+            b.all_discovered_at = Some(t_start);
+        }
+        info!(
+            "sim_bridge up: setup {}, seed {}, mode {:?}, {} Hz, {} robots",
+            p.setup,
+            p.seed,
+            p.mode,
+            p.rate_hz,
+            b.core.env.n_robots()
+        );
+        // Writers exist from the start, so readers have matched them before the first state
+        // (a volatile sample sent before matching is lost).
+        b.publish_state(p.mode == Mode::Realtime)?;
+        Ok(b)
+    }
+
+    fn now_s(&self) -> f64 {
+        self.t0.elapsed().as_secs_f64()
+    }
+
+    /// A cmd_vel reader for robot `name` (once), registered with mio.
+    fn subscribe_cmd(&mut self, name: &str) -> anyhow::Result<()> {
+        if self.cmd_subs.iter().any(|(n, _)| n == name) {
+            return Ok(());
+        }
+        self.wd.beat(); // start-up progress: one reader per robot
+        let mut s: Subscription<Twist> = subscription(
+            self.node,
+            &robot(name, Leaf::CmdVel).ros_name(),
+            Profile::RobotStream,
+        )?;
+        self.poll
+            .registry()
+            .register(&mut s, Token(self.cmd_subs.len()), Interest::READABLE)?;
+        self.cmd_subs.push((name.to_string(), s));
+        Ok(())
+    }
+
+    /// Bring the writers up to date with the entities; with `send`, build the state and
+    /// publish it now, or hold it (test_state_delay_ms).
+    fn publish_state(&mut self, send: bool) -> anyhow::Result<()> {
+        self.out.sync(self.ctx, self.node, self.core, self.wd)?;
+        if !send {
+            return Ok(());
+        }
+        let f = StateFrame::of(self.core);
+        if self.state_q.is_active() {
+            self.state_q.push(Instant::now(), f);
+        } else {
+            self.out.send(f, &mut self.rec);
         }
         Ok(())
-    };
+    }
 
-    let print_metrics = |m: &MetricsLine| {
-        if let Ok(s) = serde_json::to_string(m) {
-            println!("{s}");
-        }
-    };
-
-    let period = Duration::from_secs_f64(1.0 / p.rate_hz);
-    let t_start = Instant::now();
-    let mut next_tick = t_start;
-    let mut next_discovery = t_start;
-    let metrics_period = Duration::from_secs_f64(p.metrics_period_s);
-    let mut next_metrics = t_start + metrics_period;
-    // lockstep start: when every initial robot's cmd_vel was discovered (+ settle)
-    let mut all_discovered_at: Option<Instant> = if initial.is_empty() {
-        Some(t_start)
-    } else {
-        None
-    };
-    let mut started = p.mode == Mode::Realtime;
-
-    info!(
-        "sim_bridge up: setup {}, seed {}, mode {:?}, {} Hz, {} robots",
-        p.setup,
-        p.seed,
-        p.mode,
-        p.rate_hz,
-        core.env.n_robots()
-    );
-    // Writers exist from the start, so readers have matched them before the first state
-    // (a volatile sample sent before matching is lost).
-    publish_state(
-        core,
-        node,
-        &mut robots_w,
-        &mut machines_w,
-        &mut storages_w,
-        &mut rec,
-        &mut state_q,
-        p.mode == Mode::Realtime,
-    )?;
-
-    wd.stage(Stage::Running);
-    while !stop.load(Ordering::SeqCst) {
-        wd.beat();
+    /// Wait for a command or the next deadline (at most 50 ms, to notice `stop`).
+    fn wait(&mut self) -> anyhow::Result<()> {
         let now = Instant::now();
-        let mut deadline = next_discovery
-            .min(next_metrics)
+        let mut deadline = self
+            .next_discovery
+            .min(self.next_metrics)
             .min(now + Duration::from_millis(50));
-        if p.mode == Mode::Realtime {
-            deadline = deadline.min(next_tick);
+        if self.p.mode == Mode::Realtime {
+            deadline = deadline.min(self.next_tick);
         }
-        for due in [delayed.next_due(), state_q.next_due()]
+        for due in [self.delayed.next_due(), self.state_q.next_due()]
             .into_iter()
             .flatten()
         {
             deadline = deadline.min(due);
         }
-        if let Err(e) = poll.poll(&mut events, Some(deadline.saturating_duration_since(now))) {
+        let timeout = deadline.saturating_duration_since(now);
+        if let Err(e) = self.poll.poll(&mut self.events, Some(timeout)) {
             if e.kind() != std::io::ErrorKind::Interrupted {
                 return Err(e).context("mio poll");
             }
         }
-        let t = now_s();
+        Ok(())
+    }
 
-        // ---- commands in
-        for (name, sub) in &cmd_subs {
+    /// Commands in: every robot's cmd_vel (to the core, or held with test_cmd_delay_ms),
+    /// then the typed commands of /tending/command and stdin.
+    fn take_commands(&mut self, t: f64) {
+        for (name, sub) in &self.cmd_subs {
             for _ in 0..1000 {
                 match sub.take() {
                     Ok(Some((tw, info))) => {
-                        if let Some(r) = rec.as_mut() {
+                        if let Some(r) = self.rec.as_mut() {
                             r.put(&robot(name, Leaf::CmdVel).ros_name(), &tw);
                         }
-                        if delayed.is_active() {
-                            delayed.push(Instant::now(), (name.clone(), tw, stamp_key_info(&info)));
+                        let stamp = stamp_key_info(&info);
+                        if self.delayed.is_active() {
+                            self.delayed.push(Instant::now(), (name.clone(), tw, stamp));
                             continue;
                         }
-                        let o = core.on_cmd(name, &tw, stamp_key_info(&info), t);
-                        if let crate::core::CmdOutcome::Spawned(id) = o {
-                            info!("spawned a body (id {}) for /{name}", id.0);
-                        }
+                        on_cmd(self.core, name, &tw, stamp, t);
                     }
                     Ok(None) => break,
-                    Err(_) => core.on_undecodable_cmd(),
+                    Err(_) => self.core.on_undecodable_cmd(),
                 }
             }
         }
-        while let Some((name, tw, stamp)) = delayed.pop_due(Instant::now()) {
-            if let crate::core::CmdOutcome::Spawned(id) = core.on_cmd(&name, &tw, stamp, t) {
-                info!("spawned a body (id {}) for /{name}", id.0);
-            }
+        while let Some((name, tw, stamp)) = self.delayed.pop_due(Instant::now()) {
+            on_cmd(self.core, &name, &tw, stamp, t);
         }
         let mut lines: Vec<String> = Vec::new();
-        while let Ok(Some((line, _))) = command_sub.take() {
+        while let Ok(Some((line, _))) = self.command_sub.take() {
             lines.push(line.data);
         }
-        if let Some(rx) = &stdin_rx {
+        if let Some(rx) = &self.stdin_rx {
             lines.extend(rx.try_iter().map(|l| l.trim().to_string()));
         }
         for line in lines.into_iter().filter(|l| !l.is_empty()) {
-            if let Some(r) = rec.as_mut() {
+            if let Some(r) = self.rec.as_mut() {
                 r.put(topics::COMMAND, &StdString { data: line.clone() });
             }
-            match core.apply_command(&line, t) {
+            match self.core.apply_command(&line, t) {
                 Ok(s) => info!("command `{line}`: {s}"),
                 Err(e) => warn!("command `{line}` refused: {e}"),
             }
         }
+    }
 
-        // ---- discovery of cmd_vel topics
-        if Instant::now() >= next_discovery {
-            next_discovery = Instant::now() + Duration::from_secs_f64(p.discovery_period_s);
-            for d in ctx.discovered_topics() {
-                let Some(topic) = topics::parse_topic(&d.name) else {
-                    continue;
-                };
-                if topic.leaf != Leaf::CmdVel || d.type_name != Twist::DEF.dds_name() {
-                    continue;
-                }
-                if let Entity::Robot(name) = &topic.entity {
-                    if !cmd_subs.iter().any(|(n, _)| n == name) {
-                        wd.stage(Stage::EntityEndpoints);
-                        match subscribe_cmd(node, &poll, &mut cmd_subs, name) {
-                            Ok(()) => info!("discovered /{name}/cmd_vel"),
-                            Err(e) => warn!("cannot subscribe to /{name}/cmd_vel: {e:#}"),
-                        }
-                        wd.stage(Stage::Running);
-                    }
-                }
+    /// At each discovery period: a reader for every new robot's cmd_vel; in lockstep,
+    /// note when every initial robot's cmd_vel has been seen.
+    fn discover(&mut self) {
+        if Instant::now() < self.next_discovery {
+            return;
+        }
+        self.next_discovery = Instant::now() + Duration::from_secs_f64(self.p.discovery_period_s);
+        for d in self.ctx.discovered_topics() {
+            let Some(topic) = topics::parse_topic(&d.name) else {
+                continue;
+            };
+            if topic.leaf != Leaf::CmdVel || d.type_name != Twist::DEF.dds_name() {
+                continue;
             }
-            if all_discovered_at.is_none() {
-                let found: Vec<String> = ctx
-                    .discovered_topics()
-                    .iter()
-                    .filter_map(|d| topics::parse_topic(&d.name))
-                    .filter(|t| t.leaf == Leaf::CmdVel)
-                    .map(|t| t.entity.namespace())
-                    .collect();
-                if initial
-                    .iter()
-                    .all(|n| found.iter().any(|f| f.trim_start_matches('/') == n))
-                {
-                    info!("every initial robot's cmd_vel discovered");
-                    all_discovered_at = Some(Instant::now());
+            if let Entity::Robot(name) = &topic.entity {
+                if !self.cmd_subs.iter().any(|(n, _)| n == name) {
+                    self.wd.stage(Stage::EntityEndpoints);
+                    match self.subscribe_cmd(name) {
+                        Ok(()) => info!("discovered /{name}/cmd_vel"),
+                        Err(e) => warn!("cannot subscribe to /{name}/cmd_vel: {e:#}"),
+                    }
+                    self.wd.stage(Stage::Running);
                 }
             }
         }
-
-        // ---- step
-        match p.mode {
-            Mode::Realtime => {
-                if Instant::now() >= next_tick {
-                    next_tick += period;
-                    if next_tick < Instant::now() {
-                        next_tick = Instant::now() + period;
-                    }
-                    for n in core.expire(t) {
-                        info!("removed /{n}: cmd_vel stale");
-                    }
-                    core.step(t, false)?;
-                    publish_state(
-                        core,
-                        node,
-                        &mut robots_w,
-                        &mut machines_w,
-                        &mut storages_w,
-                        &mut rec,
-                        &mut state_q,
-                        true,
-                    )?;
-                }
-            }
-            Mode::Lockstep => {
-                if !started {
-                    let settled = all_discovered_at
-                        .is_some_and(|a| a.elapsed() >= Duration::from_secs_f64(p.settle_s));
-                    let gave_up = t >= p.startup_grace_s;
-                    if settled || gave_up {
-                        if !settled {
-                            warn!("lockstep start without every initial robot discovered");
-                        }
-                        started = true;
-                        publish_state(
-                            core,
-                            node,
-                            &mut robots_w,
-                            &mut machines_w,
-                            &mut storages_w,
-                            &mut rec,
-                            &mut state_q,
-                            true,
-                        )?;
-                        core.mark_published(t);
-                    }
-                } else {
-                    let (all, timed_out) = core.lockstep_status(t);
-                    if all || timed_out {
-                        for n in core.expire(t) {
-                            info!("removed /{n}: cmd_vel stale");
-                        }
-                        core.step(t, !all)?;
-                        publish_state(
-                            core,
-                            node,
-                            &mut robots_w,
-                            &mut machines_w,
-                            &mut storages_w,
-                            &mut rec,
-                            &mut state_q,
-                            true,
-                        )?;
-                        core.mark_published(t);
-                    }
-                }
+        if self.all_discovered_at.is_none() {
+            let found: Vec<String> = self
+                .ctx
+                .discovered_topics()
+                .iter()
+                .filter_map(|d| topics::parse_topic(&d.name))
+                .filter(|t| t.leaf == Leaf::CmdVel)
+                .map(|t| t.entity.namespace())
+                .collect();
+            if self
+                .initial
+                .iter()
+                .all(|n| found.iter().any(|f| f.trim_start_matches('/') == n))
+            {
+                info!("every initial robot's cmd_vel discovered");
+                self.all_discovered_at = Some(Instant::now());
             }
         }
+    }
 
-        while let Some(f) = state_q.pop_due(Instant::now()) {
-            send_frame(f, &robots_w, &machines_w, &storages_w, &mut rec);
+    /// Real time: step at the rate, whatever the robots sent.
+    fn step_realtime(&mut self, t: f64) -> anyhow::Result<()> {
+        if Instant::now() < self.next_tick {
+            return Ok(());
         }
+        self.next_tick += self.period;
+        if self.next_tick < Instant::now() {
+            self.next_tick = Instant::now() + self.period;
+        }
+        for n in self.core.expire(t) {
+            info!("removed /{n}: cmd_vel stale");
+        }
+        self.core.step(t, false)?;
+        self.publish_state(true)
+    }
 
-        if core.done() {
-            break;
+    /// Lockstep (docs/adr/0003-lockstep.md): publish the first state once every initial
+    /// robot is discovered (or the start-up grace ran out), then step when every robot
+    /// answered the last state (or the wait timed out).
+    fn step_lockstep(&mut self, t: f64) -> anyhow::Result<()> {
+        if !self.started {
+            let settled = self
+                .all_discovered_at
+                .is_some_and(|a| a.elapsed() >= Duration::from_secs_f64(self.p.settle_s));
+            let gave_up = t >= self.p.startup_grace_s;
+            if settled || gave_up {
+                if !settled {
+                    warn!("lockstep start without every initial robot discovered");
+                }
+                self.started = true;
+                self.publish_state(true)?;
+                self.core.mark_published(t);
+            }
+            return Ok(());
         }
-        if Instant::now() >= next_metrics {
-            next_metrics += metrics_period;
-            print_metrics(&core.metrics());
+        let (all, timed_out) = self.core.lockstep_status(t);
+        if all || timed_out {
+            for n in self.core.expire(t) {
+                info!("removed /{n}: cmd_vel stale");
+            }
+            self.core.step(t, !all)?;
+            self.publish_state(true)?;
+            self.core.mark_published(t);
         }
-        if let Some(r) = rec.as_mut() {
+        Ok(())
+    }
+
+    /// test_state_delay_ms: publish the held frames that are due.
+    fn send_due_frames(&mut self) {
+        while let Some(f) = self.state_q.pop_due(Instant::now()) {
+            self.out.send(f, &mut self.rec);
+        }
+    }
+
+    /// At each metrics period: the metrics line on stdout.
+    fn metrics(&mut self) {
+        if Instant::now() >= self.next_metrics {
+            self.next_metrics += self.metrics_period;
+            print_metrics(&self.core.metrics());
+        }
+    }
+
+    fn flush_bag(&mut self) {
+        if let Some(r) = self.rec.as_mut() {
             if let Err(e) = r.w.flush_due() {
                 r.errors += 1;
                 warn!("bag flush failed: {e:#}");
             }
         }
     }
-    let m = core.metrics();
-    if let Some(r) = rec.take() {
-        let dir = r.w.dir().to_path_buf();
-        match r.w.finish() {
-            Ok(meta) => info!(
-                "bag {} finished: {} messages, {} recording errors",
-                dir.display(),
-                meta.message_count,
-                r.errors
-            ),
-            Err(e) => warn!("finishing the bag {} failed: {e:#}", dir.display()),
+
+    /// Finish the bag and print the final metrics; returns them.
+    fn shutdown(mut self) -> MetricsLine {
+        let m = self.core.metrics();
+        if let Some(r) = self.rec.take() {
+            let dir = r.w.dir().to_path_buf();
+            match r.w.finish() {
+                Ok(meta) => info!(
+                    "bag {} finished: {} messages, {} recording errors",
+                    dir.display(),
+                    meta.message_count,
+                    r.errors
+                ),
+                Err(e) => warn!("finishing the bag {} failed: {e:#}", dir.display()),
+            }
         }
+        print_metrics(&m);
+        m
     }
-    print_metrics(&m);
-    Ok(m)
+}
+
+/// A cmd_vel to the core (logging a robot it spawned).
+fn on_cmd(core: &mut Core, name: &str, tw: &Twist, stamp: Option<i64>, t: f64) {
+    if let crate::core::CmdOutcome::Spawned(id) = core.on_cmd(name, tw, stamp, t) {
+        info!("spawned a body (id {}) for /{name}", id.0);
+    }
 }
