@@ -308,6 +308,19 @@ class TendingParallelEnv(ParallelEnv):
         """The episode's metrics so far (parts, collisions by kind, P_max, MU)."""
         return self._sim.metrics()
 
+    @property
+    def state_space(self):
+        """Box of :meth:`state` for the live counts."""
+        n, m, _ = self._sim.counts()
+        key = ("state", n, m)
+        sp = self._obs_space_cache.get(key)
+        if sp is None:
+            low, high = _bounds(self.room_size, n, "self")
+            low = np.concatenate([low.ravel(), np.zeros(m, np.float32)])
+            high = np.concatenate([high.ravel(), np.ones(m, np.float32)])
+            sp = self._obs_space_cache[key] = spaces.Box(low, high, dtype=np.float32)
+        return sp
+
     def state(self):
         """Global state: every robot's (x, y, has_part), then every machine's part_ready,
         as one float32 vector (for centralized critics)."""

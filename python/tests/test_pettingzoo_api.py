@@ -137,3 +137,12 @@ def test_render_rgb_array():
     assert not np.array_equal(img, env.render())
     with pytest.warns(UserWarning, match="render_mode"):
         assert tending.parallel_env("6.4_2").render() is None
+
+
+def test_state_is_in_state_space_and_follows_live_counts():
+    env = tending.parallel_env("6.4_2", seed=0)
+    env.reset()
+    st = env.state()
+    assert st.shape == (6 * 3 + 4,) and env.state_space.contains(st)
+    env.add_robot()
+    assert env.state().shape == (7 * 3 + 4,) and env.state_space.contains(env.state())
