@@ -11,7 +11,7 @@ After training, the learned policy's greedy (argmax) actions are run for a few e
 in the env and its parts delivered are printed next to random actions and the scripted
 greedy baseline, so the figures say honestly how far a few iterations get.
 
-Usage (bench/python/run.sh does it): python bench/python/rllib_example.py --iters 5
+Usage (bench/python/run.sh does it): python bench/python/rllib_example.py --iters 10
 """
 
 from __future__ import annotations
@@ -54,9 +54,10 @@ def evaluate(policy, setup, episodes, seed=1000):
 def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--setup", default="6.4_2")
-    ap.add_argument("--iters", type=int, default=5)
+    ap.add_argument("--iters", type=int, default=10)
     ap.add_argument("--runners", type=int, default=2, help="RLlib env runners (Ray actors)")
-    ap.add_argument("--batch", type=int, default=4800, help="agent-steps per training batch")
+    ap.add_argument("--batch", type=int, default=2400,
+                    help="env steps per training batch (x robots = agent-steps)")
     ap.add_argument("--eval-episodes", type=int, default=5)
     ap.add_argument("--json", default=None, help="write the figures here")
     ap.add_argument("--md", default=None, help="append a markdown section of the figures here")
@@ -151,7 +152,7 @@ def markdown(out):
         f"PPO (Ray RLlib {out['ray']}, PyTorch {out['torch']}, new API stack) with one policy "
         f"shared by all robots, on {out['setup']} with the padded flat observation; "
         f"{out['runners']} env runners (Ray actors) sampling `tending.parallel_env` through "
-        f"RLlib's `ParallelPettingZooEnv`; {out['batch']} agent-steps per batch, 4 epochs, "
+        f"RLlib's `ParallelPettingZooEnv`; {out['batch']} env steps per batch, 4 epochs, "
         f"minibatch 512. Algorithm build: {out['build_seconds']} s.",
         "",
         "| iteration | seconds | agent-steps sampled (lifetime) | env steps (lifetime) | episode return (mean, team) |",

@@ -3,7 +3,7 @@
 # `tending bench-sim`) and the RLlib example, written to docs/bench/python.md.
 # Not CI: Ray and PyTorch are a large install. Their virtualenv lives in target/venv-rllib,
 # created if missing and reinstalled only when bench/python/requirements-rllib.txt changes.
-# ITERS (default 5) sets the RLlib training iterations.
+# ITERS (default 10) sets the RLlib training iterations.
 set -euo pipefail
 cd "$(dirname "$0")/../.."
 py_sys="$(command -v python3.11 || command -v python3)"
@@ -23,5 +23,5 @@ PATH="$PWD/$venv/bin:$PATH" "$venv/bin/python" -m pip install --quiet \
 out="docs/bench/python.md"
 "$venv/bin/python" bench/python/bench.py --tending "${CARGO_TARGET_DIR:-target}/release/tending" \
     --out "$out"
-"$venv/bin/python" bench/python/rllib_example.py --iters "${ITERS:-5}" --md "$out" \
+"$venv/bin/python" bench/python/rllib_example.py --iters "${ITERS:-10}" --md "$out" \
     --json docs/bench/python_rllib.json
