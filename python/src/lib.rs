@@ -66,17 +66,26 @@ fn parse_setup(setup: &str) -> PyResult<Setup> {
 
 /// Discrete actions from any integer numpy array (uint8, int32, int64, ...), each checked
 /// to be one of 0..5 so a bad value names its position instead of wrapping around.
-fn read_actions(actions: &Bound<'_, PyAny>, expected: usize) -> PyResult<Vec<u8>> {
+fn read_actions(
+    actions: &Bound<'_, PyAny>,
+    expected: usize,
+    n_actions: usize,
+) -> PyResult<Vec<u8>> {
     // Fast path, no numpy calls: a contiguous uint8 or int64 array (what the vector API
     // and most policies hand in).
     if let Ok(arr) = actions.extract::<PyReadonlyArrayDyn<'_, u8>>() {
         if let Ok(s) = arr.as_slice() {
-            return check_actions(s.iter().map(|&a| a as i64), expected, arr.shape());
+            return check_actions(
+                s.iter().map(|&a| a as i64),
+                expected,
+                n_actions,
+                arr.shape(),
+            );
         }
     }
     if let Ok(arr) = actions.extract::<PyReadonlyArrayDyn<'_, i64>>() {
         if let Ok(s) = arr.as_slice() {
-            return check_actions(s.iter().copied(), expected, arr.shape());
+            return check_actions(s.iter().copied(), expected, n_actions, arr.shape());
         }
     }
     let np = actions.py().import("numpy")?;
@@ -93,12 +102,13 @@ fn read_actions(actions: &Bound<'_, PyAny>, expected: usize) -> PyResult<Vec<u8>
     let s = arr
         .as_slice()
         .map_err(|e| PyValueError::new_err(format!("actions: {e}")))?;
-    check_actions(s.iter().copied(), expected, arr.shape())
+    check_actions(s.iter().copied(), expected, n_actions, arr.shape())
 }
 
 fn check_actions(
     a: impl ExactSizeIterator<Item = i64>,
     expected: usize,
+    n_actions: usize,
     shape: &[usize],
 ) -> PyResult<Vec<u8>> {
     if a.len() != expected {
@@ -109,16 +119,28 @@ fn check_actions(
     }
     a.enumerate()
         .map(|(i, a)| {
-            if (0..sim::N_ACTIONS as i64).contains(&a) {
+            if (0..n_actions as i64).contains(&a) {
                 Ok(a as u8)
             } else {
                 Err(PyValueError::new_err(format!(
-                    "actions: action {a} at index {i} is not one of 0..{} (0 stay, 1 left, 2 right, 3 down, 4 up)",
-                    sim::N_ACTIONS
+                    "actions: action {a} at index {i} is not one of 0..{n_actions} ({})",
+                    ACTION_NAMES
                 )))
             }
         })
         .collect()
+}
+
+const ACTION_NAMES: &str = "0 stay, 1 left, 2 right, 3 down, 4 up; with diagonal_actions \
+                            5 left-down, 6 right-down, 7 left-up, 8 right-up";
+
+/// Actions per robot: the paper's 5, or 9 with the diagonals (`obs::action`).
+fn n_actions(diagonal: bool) -> usize {
+    if diagonal {
+        obs::action::N_ACTIONS_WITH_DIAGONALS
+    } else {
+        obs::action::N_AXIS_ACTIONS
+    }
 }
 
 fn metrics_dict<'py>(py: Python<'py>, m: &Metrics) -> PyResult<Bound<'py, PyDict>> {
@@ -310,6 +332,7 @@ fn render_rgb(env: &Env, px: usize) -> Array3<u8> {
 pub struct Sim {
     env: Env,
     obs: ObsBatch,
+    n_actions: usize,
 }
 
 #[pymethods]
@@ -317,12 +340,13 @@ impl Sim {
     /// `setup` `N.M_K`; the first episode laid out from `seed`; config as TOML text or JSON
     /// text (at most one).
     #[new]
-    #[pyo3(signature = (setup, seed, config_toml=None, config_json=None))]
+    #[pyo3(signature = (setup, seed, config_toml=None, config_json=None, diagonal_actions=false))]
     fn new(
         setup: &str,
         seed: u64,
         config_toml: Option<&str>,
         config_json: Option<&str>,
+        diagonal_actions: bool,
     ) -> PyResult<Self> {
         let cfg = parse_config(config_toml, config_json)?;
         let setup = parse_setup(setup)?;
@@ -330,7 +354,14 @@ impl Sim {
         Ok(Self {
             env,
             obs: ObsBatch::default(),
+            n_actions: n_actions(diagonal_actions),
         })
+    }
+
+    /// Discrete actions per robot: 5, or 9 with `diagonal_actions`.
+    #[getter]
+    fn n_actions(&self) -> usize {
+        self.n_actions
     }
 
     /// Start a new episode with the initial setup, laid out from `seed`.
@@ -340,7 +371,7 @@ impl Sim {
 
     /// One step with one discrete action per robot (0 stay, 1 left, 2 right, 3 down, 4 up).
     fn step(&mut self, py: Python<'_>, actions: &Bound<'_, PyAny>) -> PyResult<()> {
-        let a = read_actions(actions, self.env.n_robots())?;
+        let a = read_actions(actions, self.env.n_robots(), self.n_actions)?;
         let env = &mut self.env;
         py.allow_threads(|| env.step_actions(&a))
             .map_err(|e| sim_err("actions", e))
@@ -600,6 +631,7 @@ pub struct VecSim {
     episode: Vec<u64>,
     n: usize,
     counts: obs::Counts,
+    n_actions: usize,
 }
 
 /// `n` chunks of `w` values; empty slices when `w` is 0 (a group with no entities, e.g.
@@ -653,13 +685,14 @@ type VecStep<'py> = (
 #[pymethods]
 impl VecSim {
     #[new]
-    #[pyo3(signature = (setup, n_envs, seed, config_toml=None, config_json=None))]
+    #[pyo3(signature = (setup, n_envs, seed, config_toml=None, config_json=None, diagonal_actions=false))]
     fn new(
         setup: &str,
         n_envs: usize,
         seed: u64,
         config_toml: Option<&str>,
         config_json: Option<&str>,
+        diagonal_actions: bool,
     ) -> PyResult<Self> {
         if n_envs == 0 {
             return Err(PyValueError::new_err("n_envs: must be at least 1"));
@@ -678,6 +711,7 @@ impl VecSim {
             base_seed: seed,
             episode: vec![0; n_envs],
             counts,
+            n_actions: n_actions(diagonal_actions),
         })
     }
 
@@ -688,6 +722,11 @@ impl VecSim {
     #[getter]
     fn robots_per_env(&self) -> usize {
         self.n
+    }
+    /// Discrete actions per robot: 5, or 9 with `diagonal_actions`.
+    #[getter]
+    fn n_actions(&self) -> usize {
+        self.n_actions
     }
     /// (machines, storages, peers) per observation row.
     #[getter]
@@ -759,7 +798,7 @@ impl VecSim {
         actions: &Bound<'py, PyAny>,
     ) -> PyResult<VecStep<'py>> {
         let (e_n, n) = (self.envs.len(), self.n);
-        let a = read_actions(actions, e_n * n)?;
+        let a = read_actions(actions, e_n * n, self.n_actions)?;
         let rewards = PyArray2::<f32>::zeros(py, [e_n, n], false);
         let mut done = vec![false; e_n];
         let obs = obs_arrays(py, &[e_n, n], self.counts);

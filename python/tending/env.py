@@ -32,7 +32,9 @@ class TendingParallelEnv(ParallelEnv):
     """The machine-tending scenario of the SMAPPO paper (sections III, IV-C..E).
 
     Agents are ``robot_<id>`` (ids are stable while robots come and go, and restart at 0
-    on reset). Actions: ``Discrete(5)``, 0 stay, 1 left, 2 right, 3 down, 4 up.
+    on reset). Actions: ``Discrete(5)``, 0 stay, 1 left, 2 right, 3 down, 4 up (the
+    paper's); ``diagonal_actions=True`` gives ``Discrete(9)``, adding 5 left-down,
+    6 right-down, 7 left-up, 8 right-up at the same speed.
 
     Observations (``obs_layout="dict"``): a ``Dict`` of per-group arrays, relative
     positions in metres, the room's centre at the origin:
@@ -75,6 +77,7 @@ class TendingParallelEnv(ParallelEnv):
         obs_layout: str = "dict",
         flat_max: tuple[int, int, int] | None = None,
         render_size: int = 460,
+        diagonal_actions: bool = False,
     ):
         setup = check_setup(setup)
         self._base_seed = check_seed(seed)
@@ -88,8 +91,13 @@ class TendingParallelEnv(ParallelEnv):
             16 <= render_size <= 4096
         ):
             raise ValueError(f"render_size: expected an int in 16..4096, got {render_size!r}")
+        if not isinstance(diagonal_actions, bool):
+            raise TypeError(f"diagonal_actions: expected a bool, got {diagonal_actions!r}")
         toml, js = config_args(config)
-        self._sim = _native.Sim(setup, _native.episode_seed(self._base_seed, 0, 0), toml, js)
+        self._sim = _native.Sim(
+            setup, _native.episode_seed(self._base_seed, 0, 0), toml, js, diagonal_actions
+        )
+        self.n_actions = self._sim.n_actions
         self.render_mode = render_mode
         self.render_size = render_size
         self.obs_layout = obs_layout
@@ -155,7 +163,7 @@ class TendingParallelEnv(ParallelEnv):
         # One object per agent, so seeding it (PettingZoo's seed test) sticks.
         sp = self._action_spaces.get(agent)
         if sp is None:
-            sp = self._action_spaces[agent] = spaces.Discrete(_native.N_ACTIONS)
+            sp = self._action_spaces[agent] = spaces.Discrete(self.n_actions)
         return sp
 
     # ---- episode ------------------------------------------------------------------------
@@ -194,10 +202,11 @@ class TendingParallelEnv(ParallelEnv):
                 v = int(act)
             except (TypeError, ValueError):
                 raise TypeError(f"actions: action for {agent} is {act!r}, not an integer") from None
-            if v != act or not 0 <= v < _native.N_ACTIONS:
+            if v != act or not 0 <= v < self.n_actions:
                 raise ValueError(
-                    f"actions: action {act!r} for {agent} is not one of 0..{_native.N_ACTIONS} "
-                    "(0 stay, 1 left, 2 right, 3 down, 4 up)"
+                    f"actions: action {act!r} for {agent} is not one of 0..{self.n_actions} "
+                    "(0 stay, 1 left, 2 right, 3 down, 4 up"
+                    + ("; 5 left-down, 6 right-down, 7 left-up, 8 right-up)" if self.n_actions > 5 else ")")
                 )
             a[i] = v
         self._sim.step(a)
@@ -386,5 +395,6 @@ def parallel_env(
     **kwargs,
 ) -> TendingParallelEnv:
     """A PettingZoo ParallelEnv of the tending scenario; see :class:`TendingParallelEnv`
-    (extra keyword arguments: ``obs_layout``, ``flat_max``, ``render_size``)."""
+    (extra keyword arguments: ``obs_layout``, ``flat_max``, ``render_size``,
+    ``diagonal_actions``)."""
     return TendingParallelEnv(setup=setup, seed=seed, config=config, render_mode=render_mode, **kwargs)

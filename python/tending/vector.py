@@ -23,19 +23,22 @@ class TendingVectorEnv:
     episode ``k`` is laid out from ``episode_seed(seed, e, k)``.
     """
 
-    def __init__(self, setup: str = "14.10_4", n_envs: int = 8, seed: int = 0, config=None):
+    def __init__(self, setup: str = "14.10_4", n_envs: int = 8, seed: int = 0, config=None,
+                 diagonal_actions: bool = False):
         setup = check_setup(setup)
         seed = check_seed(seed)
         if isinstance(n_envs, bool) or not isinstance(n_envs, int) or n_envs < 1:
             raise ValueError(f"n_envs: expected an int >= 1, got {n_envs!r}")
+        if not isinstance(diagonal_actions, bool):
+            raise TypeError(f"diagonal_actions: expected a bool, got {diagonal_actions!r}")
         toml, js = config_args(config)
-        self._v = _native.VecSim(setup, n_envs, seed, toml, js)
+        self._v = _native.VecSim(setup, n_envs, seed, toml, js, diagonal_actions)
         self.setup = setup
         self.n_envs = n_envs
         self.n_robots = self._v.robots_per_env
         self.episode_steps = self._v.episode_steps
         self.room_size = self._v.room_size
-        self.n_actions = _native.N_ACTIONS
+        self.n_actions = self._v.n_actions
 
     @staticmethod
     def _dict(arrs):
@@ -48,7 +51,7 @@ class TendingVectorEnv:
         return self._dict(self._v.reset(seed)), {}
 
     def step(self, actions):
-        """``actions``: integers 0..4 shaped (n_envs, n_robots) (or flat). Returns
+        """``actions``: integers 0..n_actions shaped (n_envs, n_robots) (or flat). Returns
         (observations, rewards (E,N) float32, terminated (E,N), truncated (E,N), infos)."""
         obs, rewards, done, final, metrics = self._v.step(actions)
         terminated = np.zeros(rewards.shape, dtype=bool)
@@ -74,6 +77,8 @@ class TendingVectorEnv:
         pass
 
 
-def vector_env(setup: str = "14.10_4", n_envs: int = 8, seed: int = 0, config=None) -> TendingVectorEnv:
+def vector_env(setup: str = "14.10_4", n_envs: int = 8, seed: int = 0, config=None,
+               diagonal_actions: bool = False) -> TendingVectorEnv:
     """``n_envs`` environments stepped in Rust in one call; see :class:`TendingVectorEnv`."""
-    return TendingVectorEnv(setup=setup, n_envs=n_envs, seed=seed, config=config)
+    return TendingVectorEnv(setup=setup, n_envs=n_envs, seed=seed, config=config,
+                            diagonal_actions=diagonal_actions)

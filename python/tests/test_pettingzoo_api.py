@@ -146,3 +146,24 @@ def test_state_is_in_state_space_and_follows_live_counts():
     assert st.shape == (6 * 3 + 4,) and env.state_space.contains(st)
     env.add_robot()
     assert env.state().shape == (7 * 3 + 4,) and env.state_space.contains(env.state())
+
+
+def test_diagonal_actions():
+    env = tending.parallel_env("2.2_2", seed=0, diagonal_actions=True)
+    assert env.action_space("robot_0").n == 9
+    parallel_api_test(env, num_cycles=50)
+    obs, _ = env.reset()
+    before = obs["robot_0"]["self"][:2].copy()
+    for _ in range(3):
+        obs, *_ = env.step({"robot_0": 8, "robot_1": 0})  # right-up
+    d = obs["robot_0"]["self"][:2] - before
+    assert d[0] > 0.02 and d[1] > 0.02 and d[0] == pytest.approx(d[1], rel=0.2)
+    plain = tending.parallel_env("2.2_2")
+    plain.reset()
+    with pytest.raises(ValueError, match="action 8 for robot_0 is not one of 0..5"):
+        plain.step({"robot_0": 8, "robot_1": 0})
+    v = tending.vector_env("2.2_2", n_envs=2, diagonal_actions=True)
+    v.reset()
+    v.step(np.full((2, 2), 8))
+    with pytest.raises(ValueError, match="action 9"):
+        v.step(np.full((2, 2), 9))
