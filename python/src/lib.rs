@@ -553,6 +553,10 @@ impl Sim {
     fn dt(&self) -> f32 {
         self.env.config().world.dt
     }
+    /// Speed of the discrete actions and the velocity commands' clamp, m/s.
+    fn k_speed(&self) -> f32 {
+        self.env.config().task.k_speed
+    }
     /// The full scenario config in effect, as TOML.
     fn config_toml(&self) -> String {
         self.env.config().to_toml()

@@ -34,7 +34,9 @@ class TendingParallelEnv(ParallelEnv):
     Agents are ``robot_<id>`` (ids are stable while robots come and go, and restart at 0
     on reset). Actions: ``Discrete(5)``, 0 stay, 1 left, 2 right, 3 down, 4 up (the
     paper's); ``diagonal_actions=True`` gives ``Discrete(9)``, adding 5 left-down,
-    6 right-down, 7 left-up, 8 right-up at the same speed.
+    6 right-down, 7 left-up, 8 right-up at the same speed; ``action_type="velocity"``
+    gives ``Box(-k_speed, k_speed, (2,))``: a holonomic velocity command (vx, vy) in m/s,
+    the simulator's native input (its norm is clamped to k_speed), as ROS Twist drives it.
 
     Observations (``obs_layout="dict"``): a ``Dict`` of per-group arrays, relative
     positions in metres, the room's centre at the origin:
@@ -78,6 +80,7 @@ class TendingParallelEnv(ParallelEnv):
         flat_max: tuple[int, int, int] | None = None,
         render_size: int = 460,
         diagonal_actions: bool = False,
+        action_type: str = "discrete",
     ):
         setup = check_setup(setup)
         self._base_seed = check_seed(seed)
@@ -93,11 +96,15 @@ class TendingParallelEnv(ParallelEnv):
             raise ValueError(f"render_size: expected an int in 16..4096, got {render_size!r}")
         if not isinstance(diagonal_actions, bool):
             raise TypeError(f"diagonal_actions: expected a bool, got {diagonal_actions!r}")
+        if action_type not in ("discrete", "velocity"):
+            raise ValueError(f"action_type: {action_type!r} is not 'discrete' or 'velocity'")
+        self.action_type = action_type
         toml, js = config_args(config)
         self._sim = _native.Sim(
             setup, _native.episode_seed(self._base_seed, 0, 0), toml, js, diagonal_actions
         )
         self.n_actions = self._sim.n_actions
+        self.k_speed = self._sim.k_speed()
         self.render_mode = render_mode
         self.render_size = render_size
         self.obs_layout = obs_layout
@@ -163,7 +170,12 @@ class TendingParallelEnv(ParallelEnv):
         # One object per agent, so seeding it (PettingZoo's seed test) sticks.
         sp = self._action_spaces.get(agent)
         if sp is None:
-            sp = self._action_spaces[agent] = spaces.Discrete(self.n_actions)
+            if self.action_type == "velocity":
+                k = self.k_speed
+                sp = spaces.Box(-k, k, shape=(2,), dtype=np.float32)
+            else:
+                sp = spaces.Discrete(self.n_actions)
+            self._action_spaces[agent] = sp
         return sp
 
     # ---- episode ------------------------------------------------------------------------
@@ -192,24 +204,13 @@ class TendingParallelEnv(ParallelEnv):
         extra = set(actions) - set(agents)
         if extra:
             raise ValueError(f"actions: unknown or inactive agents {sorted(map(str, extra))}")
-        a = np.empty(len(agents), dtype=np.int64)
-        for i, agent in enumerate(agents):
-            try:
-                act = actions[agent]
-            except KeyError:
-                raise ValueError(f"actions: no action for {agent}") from None
-            try:
-                v = int(act)
-            except (TypeError, ValueError):
-                raise TypeError(f"actions: action for {agent} is {act!r}, not an integer") from None
-            if v != act or not 0 <= v < self.n_actions:
-                raise ValueError(
-                    f"actions: action {act!r} for {agent} is not one of 0..{self.n_actions} "
-                    "(0 stay, 1 left, 2 right, 3 down, 4 up"
-                    + ("; 5 left-down, 6 right-down, 7 left-up, 8 right-up)" if self.n_actions > 5 else ")")
-                )
-            a[i] = v
-        self._sim.step(a)
+        missing = [a for a in agents if a not in actions]
+        if missing:
+            raise ValueError(f"actions: no action for {missing[0]}")
+        if self.action_type == "velocity":
+            self._sim.step_velocities(self._velocities(actions, agents))
+        else:
+            self._sim.step(self._discrete(actions, agents))
         obs = self._observations()
         rew = self._sim.rewards()
         rewards = {agent: float(rew[i]) for i, agent in enumerate(agents)}
@@ -228,6 +229,37 @@ class TendingParallelEnv(ParallelEnv):
             self.agents = []
             self._needs_reset = True
         return obs, rewards, terminations, truncations, infos
+
+    def _discrete(self, actions, agents):
+        a = np.empty(len(agents), dtype=np.int64)
+        for i, agent in enumerate(agents):
+            act = actions[agent]
+            try:
+                v = int(act)
+            except (TypeError, ValueError):
+                raise TypeError(f"actions: action for {agent} is {act!r}, not an integer") from None
+            if v != act or not 0 <= v < self.n_actions:
+                raise ValueError(
+                    f"actions: action {act!r} for {agent} is not one of 0..{self.n_actions} "
+                    "(0 stay, 1 left, 2 right, 3 down, 4 up"
+                    + ("; 5 left-down, 6 right-down, 7 left-up, 8 right-up)" if self.n_actions > 5 else ")")
+                )
+            a[i] = v
+        return a
+
+    def _velocities(self, actions, agents):
+        """(n, 2) velocity commands in m/s; the simulator clamps their norm to k_speed."""
+        v = np.empty((len(agents), 2), dtype=np.float32)
+        for i, agent in enumerate(agents):
+            try:
+                v[i] = np.asarray(actions[agent], dtype=np.float32).reshape(2)
+            except (TypeError, ValueError):
+                raise ValueError(
+                    f"actions: velocity for {agent} is {actions[agent]!r}, not (vx, vy) in m/s"
+                ) from None
+            if not np.isfinite(v[i]).all():
+                raise ValueError(f"actions: velocity for {agent} is not finite: {v[i].tolist()}")
+        return v
 
     def render(self):
         if self.render_mode is None:
@@ -305,8 +337,8 @@ class TendingParallelEnv(ParallelEnv):
     def greedy_actions(self, observations=None):
         """The scripted greedy baseline's actions (``tending sim --policy greedy``) for
         dict observations (default: the current ones), as an action dict."""
-        if self.obs_layout != "dict":
-            raise ValueError("greedy_actions: needs obs_layout='dict'")
+        if self.obs_layout != "dict" or self.action_type != "discrete":
+            raise ValueError("greedy_actions: needs obs_layout='dict' and discrete actions")
         if observations is None:
             observations = self._observations()
         arrs = [np.stack([observations[a][g] for a in self.agents]) for g in GROUPS]
@@ -396,5 +428,5 @@ def parallel_env(
 ) -> TendingParallelEnv:
     """A PettingZoo ParallelEnv of the tending scenario; see :class:`TendingParallelEnv`
     (extra keyword arguments: ``obs_layout``, ``flat_max``, ``render_size``,
-    ``diagonal_actions``)."""
+    ``diagonal_actions``, ``action_type``)."""
     return TendingParallelEnv(setup=setup, seed=seed, config=config, render_mode=render_mode, **kwargs)

@@ -167,3 +167,30 @@ def test_diagonal_actions():
     v.step(np.full((2, 2), 8))
     with pytest.raises(ValueError, match="action 9"):
         v.step(np.full((2, 2), 9))
+
+
+def test_velocity_actions():
+    env = tending.parallel_env("6.4_2", seed=3, action_type="velocity")
+    sp = env.action_space("robot_0")
+    assert isinstance(sp, spaces.Box) and sp.shape == (2,) and sp.high[0] == env.k_speed
+    parallel_api_test(env, num_cycles=100)
+    parallel_seed_test(lambda: tending.parallel_env("6.4_2", seed=3, action_type="velocity"),
+                       num_cycles=100)
+    # A velocity of (k_speed, 0) is discrete action 2 (right): same trajectory and rewards.
+    d = tending.parallel_env("6.4_2", seed=3)
+    od, _ = d.reset(seed=4)
+    ov, _ = env.reset(seed=4)
+    rng = np.random.default_rng(0)
+    k = env.k_speed
+    table = {0: (0, 0), 1: (-k, 0), 2: (k, 0), 3: (0, -k), 4: (0, k)}
+    for _ in range(50):
+        acts = {a: int(rng.integers(5)) for a in d.agents}
+        od, rd, *_ = d.step(acts)
+        ov, rv, *_ = env.step({a: np.array(table[x], np.float32) for a, x in acts.items()})
+        assert data_equivalence(od, ov) and rd == rv
+    with pytest.raises(ValueError, match="robot_1.*not finite"):
+        env.step({a: (np.nan, 0.0) if a == "robot_1" else (0.0, 0.0) for a in env.agents})
+    with pytest.raises(ValueError, match="robot_0"):
+        env.step({a: (1.0, 2.0, 3.0) for a in env.agents})
+    with pytest.raises(ValueError, match="action_type"):
+        tending.parallel_env("6.4_2", action_type="torque")
