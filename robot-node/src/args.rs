@@ -37,8 +37,8 @@ pub struct Params {
     pub controller: ControllerKind,
     /// Put the policy's actions behind the one-step action shield (obs::shield).
     pub shield: bool,
-    /// Pass the policy's velocity through ORCA as a safety filter (obs::orca); None: as
-    /// the checkpoint was trained (`Policy::trained_with_orca_filter`).
+    /// Pass the policy's velocity through ORCA as a safety filter (obs::orca); None: on,
+    /// unless `shield` is (safety by default; `orca_filter:=false` for the raw policy).
     pub orca_filter: Option<bool>,
     /// Pick/place reach beyond the robot radius (greedy-orca stops within it); default:
     /// `robot_radius` (the simulator's default reach equals its radius at every scale).
@@ -146,7 +146,7 @@ impl Params {
 
 pub const USAGE: &str = "usage: robot_node [--ros-args -r __ns:=/robot_N [-r __node:=NAME] \
 [-p NAME:=VALUE]... [--params-file FILE.yaml]... [--log-level LEVEL]]
-parameters: policy (path), controller (greedy|greedy-orca|policy), shield (false), orca_filter (as the checkpoint was trained),
+parameters: policy (path), controller (greedy|greedy-orca|policy), shield (false), orca_filter (true unless shield:=true),
             control_rate_hz (10),
             use_sim_time (false), reach (= robot_radius),
             k_speed (0.5), stale_timeout_s (1.0), static_stale_timeout_s (= stale_timeout_s, <=0 off),

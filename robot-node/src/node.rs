@@ -56,10 +56,12 @@ pub fn make_controller(p: &Params) -> anyhow::Result<(Box<dyn Controller>, f64)>
             if p.shield {
                 c = c.with_shield(crate::controller::shield_params(p));
             }
-            // As trained, unless told otherwise; the shield replaces the default filter
-            // (the rule `tending eval` follows, so lockstep runs reproduce it).
+            // Safety on by default, as a factory deploys it: a learned policy's command goes
+            // through the ORCA filter unless `orca_filter:=false`; the shield, when asked
+            // for, replaces it (the rules `tending eval --orca-filter/--shield` reproduce).
             let trained = c.trained_with_orca_filter();
-            if p.orca_filter.unwrap_or(trained && !p.shield) {
+            if p.orca_filter.unwrap_or(!p.shield) {
+                info!("policy commands pass through the ORCA safety filter");
                 c = c.with_orca_filter(crate::controller::orca_params(p))?;
             } else if trained {
                 tracing::warn!(

@@ -104,6 +104,15 @@ fn bundled_policy_fleet_in_lockstep_reproduces_the_offline_episode() {
     let (seed, steps) = (0, 200);
     let off = offline_policy(setup, seed, steps, &path);
     let env0 = Env::new(ScenarioConfig::default(), setup, seed).unwrap();
-    let m = fleet_lockstep(setup, seed, steps, domain(1), &env0, Some(&path), &[]);
+    // The raw policy: robot_node's default ORCA filter off (lockstep_safety covers it).
+    let m = fleet_lockstep(
+        setup,
+        seed,
+        steps,
+        domain(1),
+        &env0,
+        Some(&path),
+        &["orca_filter:=false"],
+    );
     assert_same("policy", &off, &m, steps);
 }
