@@ -561,7 +561,7 @@ impl Sim {
     fn config_toml(&self) -> String {
         self.env.config().to_toml()
     }
-    /// Robots (x, y, vx, vy, has_part) in robot order.
+    /// Robots (id, x, y, vx, vy, has_part) in robot order.
     fn robot_states(&self) -> Vec<(u32, f32, f32, f32, f32, bool)> {
         self.env
             .robots()
