@@ -136,10 +136,11 @@ mod tests {
     fn masks_moves_into_a_close_peer_only() {
         // A peer 0.2 m to the right (gap 0.04): moving right closes it to -0.01.
         let s = safe_actions(&[0.0, 0.0, 0.0], &[], &[0.9, 0.9], &[0.2, 0.0, 0.0], &p());
-        assert_eq!(s, [true, true, false, true, true]);
+        // right, and the two diagonals with a rightward part, are masked
+        assert_eq!(s, [true, true, false, true, true, true, false, true, false]);
         // Far peer: nothing masked.
         let s = safe_actions(&[0.0, 0.0, 0.0], &[], &[0.9, 0.9], &[0.6, 0.0, 0.0], &p());
-        assert_eq!(s, [true; 5]);
+        assert_eq!(s, [true; 9]);
     }
 
     #[test]
@@ -166,7 +167,8 @@ mod tests {
             0.17, 0.0, 0.0, -0.17, 0.0, 0.0, 0.0, 0.17, 0.0, 0.0, -0.17, 0.0,
         ];
         let s = safe_actions(&[0.0, 0.0, 0.0], &[], &[0.9, 0.9], &peers, &p());
-        assert_eq!(s, [true, false, false, false, false]);
+        assert_eq!(s, [true, false, false, false, false, false, false, false, false]);
+        // a 5-action policy's logits take the first 5 verdicts
         let mut l = [0.1, 3.0, 2.0, 1.0, 0.5];
         assert_eq!(mask_logits(&mut l, &s), 4);
         assert!(l.iter().all(|x| x.is_finite()));
