@@ -13,11 +13,10 @@
 
 use std::collections::{BTreeMap, HashMap};
 use std::path::PathBuf;
-use std::sync::atomic::{AtomicBool, Ordering};
-use std::sync::Arc;
+use std::sync::atomic::Ordering;
 use std::time::{Duration, Instant};
 
-use anyhow::{anyhow, bail, Context as _, Result};
+use anyhow::{anyhow, bail, Result};
 use bag::{BagReader, BagWriter};
 use clap::{Args, Subcommand};
 use msgs::topics::{self, Entity, Leaf};
@@ -25,9 +24,9 @@ use msgs::{
     schema, Bool, Clock, DiagnosticArray, MarkerArray, MsgDef, PoseStamped, Profile, RosMessage,
     StdString, Time, Twist,
 };
-use ros2_client::dds::{Context, ContextOptions, Node, Publisher, Subscription};
+use ros2_client::dds::{Node, Publisher, Subscription};
 use ros2_client::qos::{Durability, History, Reliability};
-use ros2_client::{Name, NodeName, NodeOptions, QosProfile};
+use ros2_client::QosProfile;
 
 #[derive(Args)]
 pub struct BagArgs {
@@ -565,57 +564,19 @@ fn render(path: &std::path::Path, out: &std::path::Path, frame_period: f64) -> R
 
 // ------------------------------------------------------------------------ DDS helpers
 
-fn dds_err<E: std::fmt::Debug>(what: &str) -> impl FnOnce(E) -> anyhow::Error + '_ {
-    move |e| anyhow!("{what}: {e:?}")
-}
-
 fn domain(d: Option<u16>) -> u16 {
     d.or_else(|| std::env::var("ROS_DOMAIN_ID").ok()?.parse().ok())
         .unwrap_or(0)
 }
 
-struct RosNode {
-    ctx: Context,
-    node: Option<Node>,
-    spin: Option<std::thread::JoinHandle<()>>,
-}
-
-impl RosNode {
-    fn new(domain_id: u16, name: &str) -> Result<Self> {
-        let ctx = Context::with_options(ContextOptions::new().domain_id(domain_id))
-            .map_err(dds_err("DDS context"))?;
-        let mut node = ctx
-            .new_node(
-                NodeName::new("/", name).map_err(dds_err("node name"))?,
-                NodeOptions::new().enable_rosout(false),
-            )
-            .map_err(dds_err("create node"))?;
-        let spinner = node.spinner().map_err(dds_err("spinner"))?;
-        let spin = std::thread::Builder::new()
-            .name("ros2-spinner".into())
-            .spawn(move || {
-                if let Err(e) = smol::block_on(spinner.spin()) {
-                    eprintln!("spinner stopped: {e:?}");
-                }
-            })?;
-        Ok(Self {
-            ctx,
-            node: Some(node),
-            spin: Some(spin),
-        })
-    }
-    fn node(&mut self) -> &mut Node {
-        self.node.as_mut().expect("node lives until drop")
-    }
-}
-
-impl Drop for RosNode {
-    fn drop(&mut self) {
-        drop(self.node.take()); // stops the spinner
-        if let Some(h) = self.spin.take() {
-            let _ = h.join();
-        }
-    }
+/// The CLI's own node (no rosout), spinning so that topic discovery works.
+fn ros_node(domain_id: u16, name: &str) -> Result<ros::RosNode> {
+    let spec = ros::NodeSpec {
+        namespace: "/",
+        name,
+        enable_rosout: false,
+    };
+    ros::RosNode::start(&ros::context(domain_id)?, &spec, "ros2-spinner")
 }
 
 type Drain = Box<dyn FnMut(&mut BagWriter) -> Result<usize>>;
@@ -628,16 +589,7 @@ fn wall_ns() -> u64 {
 }
 
 fn recorder<M: RosMessage>(node: &mut Node, name: &str, qos: QosProfile) -> Result<Drain> {
-    let topic = node
-        .create_topic(
-            &Name::parse(name).map_err(dds_err("topic name"))?,
-            M::type_name(),
-            &qos,
-        )
-        .map_err(dds_err("create topic"))?;
-    let sub: Subscription<M> = node
-        .create_subscription(&topic, Some(qos))
-        .map_err(dds_err("create subscription"))?;
+    let sub: Subscription<M> = ros::subscription_qos(node, name, qos)?;
     let name = name.to_string();
     Ok(Box::new(move |w: &mut BagWriter| {
         let mut n = 0;
@@ -677,19 +629,11 @@ fn recorder_for(node: &mut Node, name: &str, def: &MsgDef, qos: QosProfile) -> R
     }
 }
 
-fn stop_flag() -> Result<Arc<AtomicBool>> {
-    let stop = Arc::new(AtomicBool::new(false));
-    let s = stop.clone();
-    ctrlc::set_handler(move || s.store(true, Ordering::SeqCst))
-        .context("install SIGINT/SIGTERM handler")?;
-    Ok(stop)
-}
-
 // ----------------------------------------------------------------------------- record
 
 pub fn record(a: RecordArgs) -> Result<()> {
-    let stop = stop_flag()?;
-    let mut ros = RosNode::new(domain(a.domain_id), "tending_record")?;
+    let stop = ros::stop_flag()?;
+    let mut ros = ros_node(domain(a.domain_id), "tending_record")?;
     let mut w = BagWriter::create(&a.dir)?;
     let start = Instant::now();
     let deadline = a
@@ -707,7 +651,7 @@ pub fn record(a: RecordArgs) -> Result<()> {
         while !stop.load(Ordering::SeqCst) && deadline.is_none_or(|d| Instant::now() < d) {
             if Instant::now() >= next_discovery {
                 next_discovery = Instant::now() + period;
-                for d in ros.ctx.discovered_topics() {
+                for d in ros.context().discovered_topics() {
                     let Some((name, def, profile)) = bag::contract_topic(&d.name) else {
                         continue;
                     };
@@ -770,16 +714,7 @@ fn player<M: RosMessage + std::fmt::Debug>(
     name: &str,
     qos: QosProfile,
 ) -> Result<SendFn> {
-    let topic = node
-        .create_topic(
-            &Name::parse(name).map_err(dds_err("topic name"))?,
-            M::type_name(),
-            &qos,
-        )
-        .map_err(dds_err("create topic"))?;
-    let p: Publisher<M> = node
-        .create_publisher(&topic, Some(qos))
-        .map_err(dds_err("create publisher"))?;
+    let p: Publisher<M> = ros::publisher_qos(node, name, qos)?;
     let name = name.to_string();
     Ok(Box::new(move |data: &[u8]| {
         let m: M = msgs::cdr::decode(data).map_err(|e| anyhow!("{name}: {e}"))?;
@@ -803,8 +738,8 @@ fn player_for(node: &mut Node, name: &str, type_name: &str, qos: QosProfile) -> 
 fn play(path: &std::path::Path, rate: f64, domain_id: Option<u16>, wait: f64) -> Result<()> {
     anyhow::ensure!(rate > 0.0, "--rate must be positive");
     let r = BagReader::open(path)?;
-    let stop = stop_flag()?;
-    let mut ros = RosNode::new(domain(domain_id), "tending_play")?;
+    let stop = ros::stop_flag()?;
+    let mut ros = ros_node(domain(domain_id), "tending_play")?;
     let mut pubs: Vec<Option<SendFn>> = Vec::new();
     for t in &r.topics {
         let qos = if t.qos_yaml.is_empty() {
@@ -866,7 +801,11 @@ fn play(path: &std::path::Path, rate: f64, domain_id: Option<u16>, wait: f64) ->
 /// storage i % K, picking (has_part false -> true) at the machine and delivering (true ->
 /// false) at the storage; /tending/metrics reports the same counts once per second.
 fn synth(dir: &std::path::Path, duration: f64, robots: usize, realtime: bool) -> Result<()> {
-    let stop = if realtime { Some(stop_flag()?) } else { None };
+    let stop = if realtime {
+        Some(ros::stop_flag()?)
+    } else {
+        None
+    };
     let mut w = BagWriter::create(dir)?;
     let machines = [[-0.8f64, 0.8], [0.8, 0.8]];
     let storages = [[0.0f64, -0.9]];

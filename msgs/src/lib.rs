@@ -1,14 +1,14 @@
 //! ROS 2 wire contract of `tending` (see DESIGN.md): serde mirrors of the standard
 //! `common_interfaces` messages, their type names and `ros2msg` schema text, CDR helpers,
-//! topic names and QoS profiles, and input validation.
+//! topic names and QoS profiles, stamp keys, and input validation. The node runtime that
+//! puts them on DDS is the `ros` crate.
 //!
 //! Only standard types cross the wire, so stock ROS 2 tools read everything.
 
 pub mod cdr;
-pub mod dds;
 pub mod qos;
-pub mod rosargs;
 pub mod schema;
+pub mod stamp;
 pub mod topics;
 pub mod types;
 pub mod validate;

@@ -15,10 +15,10 @@
 
 use std::path::PathBuf;
 
-pub use msgs::rosargs::{
+pub use ros::args::{
     key_matches, load_params_file, parse_params_yaml, parse_ros_args, ArgError, ParamValue,
 };
-use msgs::rosargs::{num, positive};
+use ros::args::{num, positive};
 
 /// Default node name.
 pub const DEFAULT_NODE_NAME: &str = "robot_node";
@@ -366,7 +366,7 @@ fn parse_robots(name: &str, v: &ParamValue) -> Result<Vec<String>, ArgError> {
         }
     }
     for r in &out {
-        if !msgs::rosargs::valid_token(r) {
+        if !ros::args::valid_token(r) {
             return Err(bad(format!("`{r}` is not a valid robot id")));
         }
     }

@@ -3,9 +3,6 @@
 //! Exit codes: 0 stopped, 1 error, 2 bad arguments, 75 (`EX_TEMPFAIL`) the watchdog ended a
 //! hung start-up or control loop ([`robot_node::watchdog`]; a restart usually succeeds).
 
-use std::sync::atomic::{AtomicBool, Ordering};
-use std::sync::Arc;
-
 use robot_node::args::{self, ArgError};
 use robot_node::watchdog::{Limits, Watchdog, EXIT_WATCHDOG};
 
@@ -23,30 +20,18 @@ fn main() {
         }
     };
 
-    let filter = tracing_subscriber::EnvFilter::try_from_default_env().unwrap_or_else(|_| {
-        let lvl = params.log_level.as_deref().unwrap_or("info");
-        // RustDDS and ros2-client are chatty at info
-        tracing_subscriber::EnvFilter::new(format!(
-            "{lvl},rustdds=warn,ros2_client=warn,ros2_client::rosout={lvl}"
-        ))
-    });
-    tracing_subscriber::fmt()
-        .with_env_filter(filter)
-        .with_writer(std::io::stderr)
-        .with_ansi(std::io::IsTerminal::is_terminal(&std::io::stderr()))
-        .init();
+    ros::init_tracing(params.log_level.as_deref());
     for w in &warnings {
         tracing::warn!("{w}");
     }
 
-    let stop = Arc::new(AtomicBool::new(false));
-    {
-        let stop = stop.clone();
-        if let Err(e) = ctrlc::set_handler(move || stop.store(true, Ordering::SeqCst)) {
-            eprintln!("robot_node: error: cannot install the signal handler: {e}");
+    let stop = match ros::stop_flag() {
+        Ok(s) => s,
+        Err(e) => {
+            eprintln!("robot_node: error: {e:#}");
             std::process::exit(1);
         }
-    }
+    };
 
     // Exit with code 75 (EX_TEMPFAIL) when start-up or the control loop hangs, so that the
     // launcher restarts the node (the safety net under the fixed RustDDS deadlock, ADR 0005)

@@ -7,8 +7,8 @@
 //!
 //! Single-threaded event loop on a mio 1 `Poll` (every subscription is a mio source;
 //! readers are drained when signalled, plus a sweep of all every 100 ms); the ros2-client
-//! spinner (graph events, parameters, rosout discovery) runs on a helper thread with a
-//! smol executor.
+//! spinner (graph events, parameters, rosout discovery) runs on a helper thread
+//! ([`ros::RosNode`]). Why: docs/adr/0007-mio-event-loop.md, 0008-shared-readers.md.
 
 use std::collections::HashSet;
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -16,13 +16,14 @@ use std::time::{Duration, Instant};
 
 use anyhow::{anyhow, Context as _};
 use ros2_client::dds::rustdds::mio1::{Events, Interest, Poll, Token};
-use ros2_client::dds::{Context, ContextOptions, Node, NodeLoggingHandle, Subscription};
+use ros2_client::dds::{Context, Node, NodeLoggingHandle, Subscription};
 use ros2_client::log::LogLevel;
-use ros2_client::{rosout, Name, NodeName, NodeOptions};
+use ros2_client::rosout;
 use tracing::{debug, info, warn};
 
 use msgs::topics::{self, Leaf};
-use msgs::{Bool, Clock, EntityTopic, PoseStamped, Profile, RosMessage, Twist};
+use msgs::{Bool, Clock, EntityTopic, PoseStamped, Profile, Twist};
+use ros::{stamp_key_info, subscription, NodeSpec, RosNode, StampedWriter};
 
 use crate::args::{ControllerKind, Params};
 use crate::controller::{Controller, GreedyController, GreedyOrcaController, PolicyController};
@@ -30,7 +31,6 @@ use crate::fanout::{self, Incoming};
 use crate::tick::{Brain, Outcome, TickResult};
 use crate::watchdog::{Stage, Watchdog};
 use crate::world::{Counters, DropReason, World, WorldConfig, WriterId};
-use msgs::dds::{stamp_key_info, StampedWriter};
 use obs::greedy::GreedyParams;
 
 /// Build the controller the parameters ask for, and the speed limit of its commands.
@@ -109,24 +109,6 @@ struct Sub {
 
 const CLOCK_TOKEN: Token = Token(usize::MAX - 1);
 
-fn dds_err<E: std::fmt::Debug>(what: &str) -> impl FnOnce(E) -> anyhow::Error + '_ {
-    move |e| anyhow!("{what}: {e:?}")
-}
-
-fn subscribe<M: RosMessage>(
-    node: &mut Node,
-    ros_name: &str,
-    profile: Profile,
-) -> anyhow::Result<Subscription<M>> {
-    let name = Name::parse(ros_name).map_err(dds_err("topic name"))?;
-    let qos = profile.qos();
-    let topic = node
-        .create_topic(&name, M::type_name(), &qos)
-        .map_err(dds_err("create topic"))?;
-    node.create_subscription::<M>(&topic, Some(qos))
-        .map_err(dds_err("create subscription"))
-}
-
 /// Run the node until `stop` is set. Returns the final counters (summed over robots in
 /// multi-robot mode).
 ///
@@ -168,8 +150,7 @@ pub fn run_watched(p: &Params, stop: &AtomicBool, wd: &Watchdog) -> anyhow::Resu
         wd.beat(); // start-up progress
     }
     wd.stage(Stage::Context);
-    let ctx = Context::with_options(ContextOptions::new().domain_id(p.domain_id))
-        .map_err(dds_err("DDS context"))?;
+    let ctx = ros::context(p.domain_id)?;
     if multi {
         info!(
             "{} robots in one process: one reader per topic, shared",
@@ -221,33 +202,20 @@ fn run_on(
     wd: &Watchdog,
 ) -> anyhow::Result<Counters> {
     wd.stage(Stage::Node);
-    let (mut node, spinner) = retry("node", stop, wd, || {
-        let mut node = ctx
-            .new_node(
-                NodeName::new(&p.namespace, &p.node_name).map_err(dds_err("node name"))?,
-                NodeOptions::new().enable_rosout(p.enable_rosout),
-            )
-            .map_err(dds_err("create node"))?;
-        let spinner = node.spinner().map_err(dds_err("spinner"))?;
-        Ok((node, spinner))
-    })?;
     let spin_name = if multi {
         "spin".to_string()
     } else {
         format!("spin-{}", p.robot_id())
     };
-    let spin_thread = std::thread::Builder::new().name(spin_name).spawn(move || {
-        if let Err(e) = smol::block_on(spinner.spin()) {
-            warn!("spinner stopped with error: {e:?}");
-        }
-    })?;
-
-    let result = event_loop(p, stop, ctx, &mut node, robots, multi, wd);
+    let spec = NodeSpec {
+        namespace: &p.namespace,
+        name: &p.node_name,
+        enable_rosout: p.enable_rosout,
+    };
+    let mut ros = retry("node", stop, wd, || RosNode::start(ctx, &spec, &spin_name))?;
+    let result = event_loop(p, stop, ctx, ros.node(), robots, multi, wd);
     wd.stage(Stage::Done);
-    drop(node); // signals the spinner to stop
-    if spin_thread.join().is_err() {
-        warn!("spinner thread panicked");
-    }
+    drop(ros); // stops the spinner
     result
 }
 
@@ -421,7 +389,7 @@ impl<'a> EventLoop<'a> {
             fanout::touch(self.hosted.iter_mut().map(|h| &mut h.brain), &t);
         }
         if self.p.use_sim_time {
-            let mut s = subscribe::<Clock>(self.node, topics::CLOCK, Profile::Clock)?;
+            let mut s = subscription::<Clock>(self.node, topics::CLOCK, Profile::Clock)?;
             self.poll
                 .registry()
                 .register(&mut s, CLOCK_TOKEN, Interest::READABLE)?;
@@ -440,12 +408,12 @@ impl<'a> EventLoop<'a> {
         let registry = self.poll.registry();
         let kind = match topic.leaf {
             Leaf::Pose => {
-                let mut s = subscribe::<PoseStamped>(self.node, &name, profile)?;
+                let mut s = subscription::<PoseStamped>(self.node, &name, profile)?;
                 registry.register(&mut s, token, Interest::READABLE)?;
                 SubKind::Pose(s)
             }
             Leaf::HasPart | Leaf::PartReady => {
-                let mut s = subscribe::<Bool>(self.node, &name, profile)?;
+                let mut s = subscription::<Bool>(self.node, &name, profile)?;
                 registry.register(&mut s, token, Interest::READABLE)?;
                 SubKind::Flag(s)
             }
@@ -759,8 +727,7 @@ fn host(
     for (me, controller, k_speed) in robots {
         let cmd_name = topics::robot(&me, Leaf::CmdVel).ros_name();
         let cmd: StampedWriter<Twist> = retry("cmd_vel writer", stop, wd, || {
-            StampedWriter::new(ctx, node, &cmd_name, Profile::RobotStream)
-                .map_err(|e| anyhow!("cmd_vel writer: {e}"))
+            StampedWriter::new(ctx, node, &cmd_name, Profile::RobotStream).context("cmd_vel writer")
         })?;
         hosted.push(Hosted {
             tag: if multi {

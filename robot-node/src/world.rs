@@ -27,7 +27,7 @@ pub const DEFAULT_WRITER: WriterId = [0; 16];
 pub struct Sample<T> {
     pub value: T,
     pub at: f64,
-    /// Simulator step stamp (microseconds, [`msgs::dds::stamp_key_ns`]): a pose's header
+    /// Simulator step stamp (microseconds, [`msgs::stamp::stamp_key_ns`]): a pose's header
     /// stamp, a flag's DDS source timestamp. Used in lockstep only.
     pub stamp: Option<i64>,
     /// The writer that published it: the topic's pinned writer.
@@ -334,7 +334,7 @@ impl World {
             msgs::InvalidMsg::NonFinite { .. } => DropReason::NonFinite,
             msgs::InvalidMsg::OutOfRoom { .. } => DropReason::OutOfRoom,
         })?;
-        let stamp = Some(msgs::dds::stamp_key_time(&msg.header.stamp));
+        let stamp = Some(msgs::stamp::stamp_key_time(&msg.header.stamp));
         let release = self.pin_release_s(&topic.entity);
         let slot = &mut self.slot(&topic.entity).pose;
         let accepted = admit(slot, writer, now, release)?;

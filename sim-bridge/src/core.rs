@@ -100,7 +100,7 @@ pub struct Core {
 
 /// Stamp key (us) of a time, the same rounding the robot nodes apply.
 pub fn key_of(t: &Time) -> i64 {
-    msgs::dds::stamp_key_time(t)
+    msgs::stamp::stamp_key_time(t)
 }
 
 impl Core {

@@ -1,6 +1,6 @@
 //! `sim_bridge`: the tending simulator behind the ROS 2 contract (DESIGN.md).
 //!
-//! - [`params`]: ROS 2 command-line parameters (`msgs::rosargs` conventions);
+//! - [`params`]: ROS 2 command-line parameters (`ros::args` conventions);
 //! - [`core`]: DDS-free logic: bodies by namespace, cmd_vel validation, spawn on first
 //!   command, despawn when stale, lockstep bookkeeping, `/tending/command`, metrics,
 //!   markers;

@@ -1,10 +1,7 @@
 //! `sim_bridge` binary: parse ROS 2 arguments, run the bridge until Ctrl-C / SIGTERM or
 //! `max_steps`.
 
-use std::sync::atomic::{AtomicBool, Ordering};
-use std::sync::Arc;
-
-use msgs::rosargs::ArgError;
+use ros::args::ArgError;
 use sim_bridge::params;
 use sim_bridge::watchdog::{Limits, Watchdog, EXIT_WATCHDOG};
 
@@ -21,26 +18,17 @@ fn main() {
             std::process::exit(2);
         }
     };
-    let filter = tracing_subscriber::EnvFilter::try_from_default_env().unwrap_or_else(|_| {
-        let lvl = p.log_level.as_deref().unwrap_or("info");
-        tracing_subscriber::EnvFilter::new(format!("{lvl},rustdds=warn,ros2_client=warn"))
-    });
-    tracing_subscriber::fmt()
-        .with_env_filter(filter)
-        .with_writer(std::io::stderr)
-        .with_ansi(std::io::IsTerminal::is_terminal(&std::io::stderr()))
-        .init();
+    ros::init_tracing(p.log_level.as_deref());
     for w in &warnings {
         tracing::warn!("{w}");
     }
-    let stop = Arc::new(AtomicBool::new(false));
-    {
-        let stop = stop.clone();
-        if let Err(e) = ctrlc::set_handler(move || stop.store(true, Ordering::SeqCst)) {
-            eprintln!("sim_bridge: error: cannot install the signal handler: {e}");
+    let stop = match ros::stop_flag() {
+        Ok(s) => s,
+        Err(e) => {
+            eprintln!("sim_bridge: error: {e:#}");
             std::process::exit(1);
         }
-    }
+    };
     // Exit with code 75 (EX_TEMPFAIL) when start-up or the step loop hangs, so that
     // `tending fleet` restarts the bridge instead of running a dead fleet.
     let wd = Watchdog::new(Limits::from_secs(p.startup_timeout_s, p.stall_timeout_s));

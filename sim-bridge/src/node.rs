@@ -5,60 +5,21 @@ use std::collections::{BTreeMap, HashMap};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
-use anyhow::{anyhow, Context as _};
+use anyhow::Context as _;
 use ros2_client::dds::rustdds::mio1::{Events, Interest, Poll, Token};
-use ros2_client::dds::{Context, ContextOptions, Node, Publisher, Subscription};
-use ros2_client::{Name, NodeName, NodeOptions};
+use ros2_client::dds::{Context, Node, Publisher, Subscription};
 use tracing::{info, warn};
 
-use msgs::dds::{stamp_key_info, StampedWriter};
 use msgs::topics::{self, machine, robot, storage, Entity, Leaf};
 use msgs::{
     Bool, Clock, DiagnosticArray, MarkerArray, PoseStamped, Profile, RosMessage, StdString, Twist,
 };
+use ros::{publisher, stamp_key_info, subscription, NodeSpec, RosNode, StampedWriter};
 
 use crate::core::{Core, MetricsLine};
 use crate::delay::DelayQueue;
 use crate::params::{BridgeParams, Mode};
 use crate::watchdog::{Stage, Watchdog};
-
-fn dds_err<E: std::fmt::Debug>(what: &str) -> impl FnOnce(E) -> anyhow::Error + '_ {
-    move |e| anyhow!("{what}: {e:?}")
-}
-
-fn publisher<M: RosMessage>(
-    node: &mut Node,
-    name: &str,
-    profile: Profile,
-) -> anyhow::Result<Publisher<M>> {
-    let qos = profile.qos();
-    let t = node
-        .create_topic(
-            &Name::parse(name).map_err(dds_err("topic name"))?,
-            M::type_name(),
-            &qos,
-        )
-        .map_err(dds_err("create topic"))?;
-    node.create_publisher(&t, Some(qos))
-        .map_err(dds_err("create publisher"))
-}
-
-fn subscription<M: RosMessage>(
-    node: &mut Node,
-    name: &str,
-    profile: Profile,
-) -> anyhow::Result<Subscription<M>> {
-    let qos = profile.qos();
-    let t = node
-        .create_topic(
-            &Name::parse(name).map_err(dds_err("topic name"))?,
-            M::type_name(),
-            &qos,
-        )
-        .map_err(dds_err("create topic"))?;
-    node.create_subscription(&t, Some(qos))
-        .map_err(dds_err("create subscription"))
-}
 
 struct EntityWriters {
     pose: StampedWriter<PoseStamped>,
@@ -137,27 +98,17 @@ pub fn run_watched(
     wd.stage(Stage::Core);
     let mut core = Core::new(p.clone(), 0.0)?;
     wd.stage(Stage::Context);
-    let ctx = Context::with_options(ContextOptions::new().domain_id(p.domain_id))
-        .map_err(dds_err("DDS context"))?;
+    let ctx = ros::context(p.domain_id)?;
     wd.stage(Stage::Node);
-    let mut node = ctx
-        .new_node(
-            NodeName::new(&p.namespace, &p.node_name).map_err(dds_err("node name"))?,
-            NodeOptions::new().enable_rosout(p.enable_rosout),
-        )
-        .map_err(dds_err("create node"))?;
-    let spinner = node.spinner().map_err(dds_err("spinner"))?;
-    let spin_thread = std::thread::Builder::new()
-        .name("ros2-spinner".into())
-        .spawn(move || {
-            if let Err(e) = smol::block_on(spinner.spin()) {
-                warn!("spinner stopped with error: {e:?}");
-            }
-        })?;
-    let r = event_loop(&p, stop, &ctx, &mut node, &mut core, t0, wd);
+    let spec = NodeSpec {
+        namespace: &p.namespace,
+        name: &p.node_name,
+        enable_rosout: p.enable_rosout,
+    };
+    let mut ros = RosNode::start(&ctx, &spec, "ros2-spinner")?;
+    let r = event_loop(&p, stop, &ctx, ros.node(), &mut core, t0, wd);
     wd.stage(Stage::Done);
-    drop(node);
-    let _ = spin_thread.join();
+    drop(ros); // stops the spinner
     r
 }
 
@@ -210,7 +161,7 @@ fn entity_writer<M: RosMessage>(
     topic: topics::EntityTopic,
     profile: Profile,
 ) -> anyhow::Result<StampedWriter<M>> {
-    StampedWriter::new(ctx, node, &topic.ros_name(), profile).map_err(|e| anyhow!(e))
+    StampedWriter::new(ctx, node, &topic.ros_name(), profile)
 }
 
 impl Outputs {

@@ -1,8 +1,8 @@
-//! `sim_bridge` parameters, from the ROS 2 command-line conventions (`msgs::rosargs`).
+//! `sim_bridge` parameters, from the ROS 2 command-line conventions (`ros::args`).
 
 use std::path::PathBuf;
 
-use msgs::rosargs::{num, parse_ros_args, positive, ArgError, ParamValue};
+use ros::args::{num, parse_ros_args, positive, ArgError, ParamValue};
 use sim::Setup;
 
 pub const DEFAULT_NODE_NAME: &str = "sim_bridge";

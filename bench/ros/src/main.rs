@@ -19,52 +19,25 @@ use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
 use anyhow::{anyhow, bail, Context as _, Result};
-use msgs::dds::{stamp_key_info, StampedWriter};
 use msgs::topics::{self, Leaf};
-use msgs::{Bool, PoseStamped, Profile, RosMessage, Time, Twist};
+use msgs::{Bool, PoseStamped, Profile, Time, Twist};
+use ros::{stamp_key_info, subscription, StampedWriter};
 use ros2_client::dds::rustdds::mio1::{Events, Interest, Poll, Token};
-use ros2_client::dds::{Context, ContextOptions, Node, Subscription};
-use ros2_client::{Name, NodeName, NodeOptions};
+use ros2_client::dds::{Context, Node, Subscription};
 
 const PING: &str = "/bench/ping";
 const PONG: &str = "/bench/pong";
 
-fn dds<E: std::fmt::Debug>(what: &'static str) -> impl FnOnce(E) -> anyhow::Error {
-    move |e| anyhow!("{what}: {e:?}")
-}
-
+/// A node nobody spins: the benchmark needs no graph events, only its endpoints.
 fn node(domain: u16, name: &str) -> Result<(Context, Node)> {
-    let ctx = Context::with_options(ContextOptions::new().domain_id(domain))
-        .map_err(dds("DDS context"))?;
-    let node = ctx
-        .new_node(
-            NodeName::new("/", name).map_err(dds("node name"))?,
-            NodeOptions::new().enable_rosout(false),
-        )
-        .map_err(dds("node"))?;
+    let ctx = ros::context(domain)?;
+    let spec = ros::NodeSpec {
+        namespace: "/",
+        name,
+        enable_rosout: false,
+    };
+    let node = ros::node::node(&ctx, &spec)?;
     Ok((ctx, node))
-}
-
-fn subscription<M: RosMessage>(node: &mut Node, name: &str, p: Profile) -> Result<Subscription<M>> {
-    let qos = p.qos();
-    let topic = node
-        .create_topic(
-            &Name::parse(name).map_err(dds("name"))?,
-            M::type_name(),
-            &qos,
-        )
-        .map_err(dds("topic"))?;
-    node.create_subscription(&topic, Some(qos))
-        .map_err(dds("subscription"))
-}
-
-fn writer<M: RosMessage>(
-    ctx: &Context,
-    node: &Node,
-    name: &str,
-    p: Profile,
-) -> Result<StampedWriter<M>> {
-    StampedWriter::new(ctx, node, name, p).map_err(|e| anyhow!("{name}: {e}"))
 }
 
 fn arg<T: std::str::FromStr>(args: &[String], flag: &str, default: T) -> Result<T> {
@@ -106,7 +79,7 @@ fn main() -> Result<()> {
 fn echo(domain: u16, max_s: f64) -> Result<()> {
     let (ctx, mut node) = node(domain, "bench_echo")?;
     let mut ping = subscription::<Twist>(&mut node, PING, Profile::RobotStream)?;
-    let pong = writer::<Twist>(&ctx, &node, PONG, Profile::RobotStream)?;
+    let pong = StampedWriter::<Twist>::new(&ctx, &node, PONG, Profile::RobotStream)?;
     let mut poll = Poll::new()?;
     poll.registry()
         .register(&mut ping, Token(0), Interest::READABLE)?;
@@ -177,13 +150,13 @@ fn latency(args: &[String]) -> Result<()> {
     let me = "robot_0";
     let (ctx, mut node) = node(domain, "bench_bridge")?;
     // the bridge's side of the contract
-    let own_pose = writer::<PoseStamped>(
+    let own_pose = StampedWriter::<PoseStamped>::new(
         &ctx,
         &node,
         &topics::robot(me, Leaf::Pose).ros_name(),
         Profile::RobotStream,
     )?;
-    let own_part = writer::<Bool>(
+    let own_part = StampedWriter::<Bool>::new(
         &ctx,
         &node,
         &topics::robot(me, Leaf::HasPart).ros_name(),
@@ -194,7 +167,7 @@ fn latency(args: &[String]) -> Result<()> {
     for j in 0..machines {
         let x = -0.8 + 1.6 * j as f64 / (machines.max(2) - 1) as f64;
         poses.push((
-            writer(
+            StampedWriter::new(
                 &ctx,
                 &node,
                 &topics::machine(j, Leaf::Pose).ros_name(),
@@ -204,7 +177,7 @@ fn latency(args: &[String]) -> Result<()> {
             0.9,
         ));
         flags.push((
-            writer(
+            StampedWriter::new(
                 &ctx,
                 &node,
                 &topics::machine(j, Leaf::PartReady).ros_name(),
@@ -216,7 +189,7 @@ fn latency(args: &[String]) -> Result<()> {
     for k in 0..storages {
         let x = -0.6 + 1.2 * k as f64 / (storages.max(2) - 1) as f64;
         poses.push((
-            writer(
+            StampedWriter::new(
                 &ctx,
                 &node,
                 &topics::storage(k, Leaf::Pose).ros_name(),
@@ -230,7 +203,7 @@ fn latency(args: &[String]) -> Result<()> {
         let name = format!("robot_{p}");
         let x = -0.9 + 1.8 * p as f64 / (peers + 1) as f64;
         poses.push((
-            writer(
+            StampedWriter::new(
                 &ctx,
                 &node,
                 &topics::robot(&name, Leaf::Pose).ros_name(),
@@ -240,7 +213,7 @@ fn latency(args: &[String]) -> Result<()> {
             0.2,
         ));
         flags.push((
-            writer(
+            StampedWriter::new(
                 &ctx,
                 &node,
                 &topics::robot(&name, Leaf::HasPart).ros_name(),
@@ -254,7 +227,7 @@ fn latency(args: &[String]) -> Result<()> {
         &topics::robot(me, Leaf::CmdVel).ros_name(),
         Profile::RobotStream,
     )?;
-    let ping = writer::<Twist>(&ctx, &node, PING, Profile::RobotStream)?;
+    let ping = StampedWriter::<Twist>::new(&ctx, &node, PING, Profile::RobotStream)?;
     let mut pong = subscription::<Twist>(&mut node, PONG, Profile::RobotStream)?;
     let mut poll = Poll::new()?;
     poll.registry()

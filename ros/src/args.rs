@@ -1,5 +1,5 @@
 //! ROS 2 command-line conventions, parsed here because ros2-client parses none; shared by
-//! `robot_node` and `sim_bridge`:
+//! `robot_node` and `sim_bridge` (each applies the parameters it knows):
 //!
 //! ```text
 //! <node> [--ros-args [-r|--remap __ns:=/robot_3] [-r __node:=name]
