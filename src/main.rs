@@ -3,6 +3,7 @@
 
 mod bag_cmd;
 mod bench_sim;
+mod chart;
 mod eval_cmd;
 mod fleet;
 mod plot;

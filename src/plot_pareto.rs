@@ -2,7 +2,7 @@
 //! setup, one point per method (a `tending eval` results.csv each, mean over its seeds).
 //! Up and to the left is better; the points a method can be compared on are in one panel.
 
-use crate::plot_font::{draw_text, draw_text_up, Align};
+use crate::chart;
 use anyhow::{bail, Context, Result};
 use clap::Args;
 use plotters::prelude::*;
@@ -100,74 +100,57 @@ fn draw(
     setups: &[&String],
     pts: &Points,
 ) -> Result<()> {
+    chart::init();
     let e = |x: DrawingAreaErrorKind<_>| anyhow::anyhow!("plot {}: {x:?}", path.display());
-    let cols = 3usize;
+    let cols = setups.len().clamp(1, 3);
     let rows = setups.len().div_ceil(cols).max(1);
-    let (pw, ph) = (380i32, 300i32);
-    let (w, h) = (pw * cols as i32, 70 + ph * rows as i32);
-    let root = BitMapBackend::new(path, (w as u32, h as u32)).into_drawing_area();
+    let (pw, ph) = (420u32, 330u32);
+    let root =
+        BitMapBackend::new(path, (pw * cols as u32, 50 + ph * rows as u32)).into_drawing_area();
     root.fill(&WHITE).map_err(e)?;
-    let black = RGBColor(0, 0, 0);
-    draw_text(&root, title, (w / 2, 8), Align::Center, 2, black);
-    // Legend: a filled square and the method name each.
-    let mut x = 20;
-    for (i, m) in methods.iter().enumerate() {
-        let c = COLOURS[i % COLOURS.len()];
-        root.draw(&Rectangle::new([(x, 36), (x + 12, 48)], c.filled()))
-            .map_err(e)?;
-        draw_text(&root, m, (x + 18, 38), Align::Left, 2, black);
-        x += 18 + 12 * m.len() as i32 + 30;
-    }
-    for (k, setup) in setups.iter().enumerate() {
-        let (cx, cy) = ((k % cols) as i32 * pw, 70 + (k / cols) as i32 * ph);
-        let by = &pts[*setup];
-        let xmax = by.values().map(|p| p.1).fold(0.0, f64::max).max(1e-3) * 1.15;
-        let ymax = by.values().map(|p| p.0).fold(0.0, f64::max).max(1.0) * 1.15;
-        // Plot area inside the panel.
-        let (l, t, r, b) = (cx + 50, cy + 28, cx + pw - 14, cy + ph - 40);
-        let px = |v: f64| l + ((v / xmax) * (r - l) as f64) as i32;
-        let py = |v: f64| b - ((v / ymax) * (b - t) as f64) as i32;
-        let grey = RGBColor(150, 150, 150);
-        root.draw(&PathElement::new(vec![(l, t), (l, b), (r, b)], black))
-            .map_err(e)?;
-        draw_text(&root, setup, ((l + r) / 2, cy + 8), Align::Center, 2, black);
-        draw_text(&root, "0", (l, b + 6), Align::Center, 1, grey);
-        draw_text(
-            &root,
-            &format!("{xmax:.3}"),
-            (r, b + 6),
-            Align::Right,
-            1,
-            grey,
-        );
-        draw_text(
-            &root,
-            "contacts / robot-step",
-            ((l + r) / 2, b + 20),
-            Align::Center,
-            1,
-            black,
-        );
-        draw_text(
-            &root,
-            &format!("{ymax:.0}"),
-            (l - 4, t),
-            Align::Right,
-            1,
-            grey,
-        );
-        draw_text_up(&root, "parts", (cx + 12, (t + b) / 2), 1, black);
-        for (i, m) in methods.iter().enumerate() {
-            if let Some(&(parts, contacts)) = by.get(m) {
-                let c = COLOURS[i % COLOURS.len()];
-                let (x, y) = (px(contacts), py(parts));
-                root.draw(&Circle::new((x, y), 6, c.filled())).map_err(e)?;
-                let label = format!("{parts:.0}");
-                draw_text(&root, &label, (x + 9, y - 3), Align::Left, 1, c);
-            }
-        }
+    let root = root.titled(title, (chart::FONT, chart::TITLE)).map_err(e)?;
+    let panels = root.split_evenly((rows, cols));
+    for (setup, area) in setups.iter().zip(panels.iter()) {
+        panel(area, setup, methods, &pts[*setup]).map_err(e)?;
     }
     root.present().map_err(e)?;
+    Ok(())
+}
+
+/// One setup: a point per method (labelled with its parts), legend in the panel.
+fn panel<DB: DrawingBackend>(
+    area: &DrawingArea<DB, plotters::coord::Shift>,
+    setup: &str,
+    methods: &[String],
+    by: &BTreeMap<String, (f64, f64)>,
+) -> Result<(), DrawingAreaErrorKind<DB::ErrorType>> {
+    let xmax = by.values().map(|p| p.1).fold(0.0, f64::max).max(1e-3) * 1.15;
+    let ymax = by.values().map(|p| p.0).fold(0.0, f64::max).max(1.0) * 1.15;
+    let mut c = ChartBuilder::on(area)
+        .caption(setup, (chart::FONT, chart::CAPTION))
+        .margin(10)
+        .x_label_area_size(40)
+        .y_label_area_size(56)
+        .build_cartesian_2d(0.0..xmax, 0.0..ymax)?;
+    chart::mesh(&mut c, "contacts per robot-step", "parts delivered")?;
+    for (i, m) in methods.iter().enumerate() {
+        let Some(&(parts, contacts)) = by.get(m) else {
+            continue;
+        };
+        let col = COLOURS[i % COLOURS.len()];
+        c.draw_series(std::iter::once(
+            EmptyElement::at((contacts, parts))
+                + Circle::new((0, 0), 6, col.filled())
+                + Text::new(
+                    format!("{parts:.0}"),
+                    (9, -7),
+                    (chart::FONT, chart::TICK).into_font().color(&col),
+                ),
+        ))?
+        .label(m.as_str())
+        .legend(move |(x, y)| Circle::new((x + 8, y), 5, col.filled()));
+    }
+    chart::legend(&mut c)?;
     Ok(())
 }
 

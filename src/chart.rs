@@ -1,0 +1,83 @@
+//! What every PNG of `tending` shares: the bundled font and the chart style.
+//!
+//! Text is rendered by plotters' `ab_glyph` feature from DejaVu Sans, bundled in the binary
+//! (`assets/fonts/`, Bitstream Vera licence beside it), so a figure looks the same on any
+//! machine and needs no system fonts (docs/adr/0010-plotting.md).
+
+use std::sync::Once;
+
+use plotters::coord::types::RangedCoordf64;
+use plotters::prelude::*;
+use plotters::style::FontStyle;
+
+static DEJAVU_SANS: &[u8] = include_bytes!("../assets/fonts/DejaVuSans.ttf");
+
+/// The family every chart asks for.
+pub const FONT: &str = "sans-serif";
+
+/// Title, axis-label and tick sizes in pixels.
+pub const TITLE: u32 = 24;
+pub const CAPTION: u32 = 18;
+pub const LABEL: u32 = 15;
+pub const TICK: u32 = 13;
+
+pub const INK: RGBColor = RGBColor(20, 20, 20);
+pub const GRID: RGBColor = RGBColor(225, 225, 225);
+
+/// Register the bundled font with plotters (once per process; before drawing any text).
+pub fn init() {
+    static ONCE: Once = Once::new();
+    ONCE.call_once(|| {
+        let ok = plotters::style::register_font(FONT, FontStyle::Normal, DEJAVU_SANS).is_ok();
+        debug_assert!(ok, "the bundled font parses");
+    });
+}
+
+/// The coordinates of every chart here: f64 on both axes.
+pub type Xy = Cartesian2d<RangedCoordf64, RangedCoordf64>;
+type Drawn<DB> = Result<(), DrawingAreaErrorKind<<DB as DrawingBackend>::ErrorType>>;
+
+/// Light grid, ticks and both axis descriptions.
+pub fn mesh<'a, DB: DrawingBackend + 'a>(
+    c: &mut ChartContext<'a, DB, Xy>,
+    x: &str,
+    y: &str,
+) -> Drawn<DB> {
+    c.configure_mesh()
+        .light_line_style(TRANSPARENT)
+        .bold_line_style(GRID)
+        .x_labels(6)
+        .x_desc(x)
+        .y_desc(y)
+        .axis_desc_style((FONT, LABEL))
+        .label_style((FONT, TICK))
+        .draw()
+}
+
+/// The legend box of the labelled series, lower right.
+pub fn legend<'a, DB: DrawingBackend + 'a>(c: &mut ChartContext<'a, DB, Xy>) -> Drawn<DB> {
+    c.configure_series_labels()
+        .position(SeriesLabelPosition::LowerRight)
+        .background_style(WHITE.mix(0.85))
+        .border_style(INK)
+        .label_font((FONT, TICK))
+        .draw()
+}
+
+#[cfg(test)]
+mod tests {
+    #[test]
+    fn the_bundled_font_renders_text() {
+        use plotters::prelude::*;
+        super::init();
+        let (w, h) = (200u32, 60u32);
+        let mut buf = vec![255u8; (w * h * 3) as usize];
+        {
+            let root = BitMapBackend::with_buffer(&mut buf, (w, h)).into_drawing_area();
+            root.draw(&Text::new("tending 0.5", (10, 10), (super::FONT, 30)))
+                .unwrap();
+            root.present().unwrap();
+        }
+        assert!(buf.iter().any(|&b| b < 128), "no glyph pixels drawn");
+    }
+}
