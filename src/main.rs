@@ -8,7 +8,6 @@ mod eval_cmd;
 mod fleet;
 mod plot;
 mod plot_cmd;
-mod plot_font;
 mod plot_pareto;
 mod render;
 mod report;
