@@ -129,130 +129,181 @@ fn pct(v: &mut [f64], q: f64) -> f64 {
     v[i]
 }
 
-fn latency(args: &[String]) -> Result<()> {
-    let robot_node: String = arg(
-        args,
-        "--robot-node",
-        "target/release/robot_node".to_string(),
-    )?;
-    let policy_path: String = arg(args, "--policy", String::new())?;
-    let n: usize = arg(args, "--n", 200)?;
-    let interval = Duration::from_millis(arg(args, "--interval-ms", 100u64)?);
-    let warmup_s: f64 = arg(args, "--warmup-s", 5.0)?;
-    let peers: u32 = arg(args, "--peers", 5)?;
-    let machines: u32 = arg(args, "--machines", 4)?;
-    let storages: u32 = arg(args, "--storages", 2)?;
-    let domain: u16 = arg(args, "--domain", 100 + (std::process::id() % 100) as u16)?;
-    let reply_timeout = Duration::from_secs(1);
-    // every run is bounded: warm-up + n slots + slack
-    let max_s = warmup_s + n as f64 * interval.as_secs_f64() * 1.5 + 30.0;
+/// `ros_bench latency`'s options.
+struct LatencyArgs {
+    robot_node: String,
+    policy: String,
+    n: usize,
+    interval: Duration,
+    warmup_s: f64,
+    peers: u32,
+    machines: u32,
+    storages: u32,
+    domain: u16,
+}
 
-    let me = "robot_0";
-    let (ctx, mut node) = node(domain, "bench_bridge")?;
-    // the bridge's side of the contract
-    let own_pose = StampedWriter::<PoseStamped>::new(
-        &ctx,
-        &node,
-        &topics::robot(me, Leaf::Pose).ros_name(),
-        Profile::RobotStream,
-    )?;
-    let own_part = StampedWriter::<Bool>::new(
-        &ctx,
-        &node,
-        &topics::robot(me, Leaf::HasPart).ros_name(),
-        Profile::RobotStream,
-    )?;
-    let mut flags: Vec<(StampedWriter<Bool>, bool)> = Vec::new();
-    let mut poses: Vec<(StampedWriter<PoseStamped>, f64, f64)> = Vec::new();
-    for j in 0..machines {
-        let x = -0.8 + 1.6 * j as f64 / (machines.max(2) - 1) as f64;
-        poses.push((
-            StampedWriter::new(
-                &ctx,
-                &node,
-                &topics::machine(j, Leaf::Pose).ros_name(),
-                Profile::LatchedPose,
+impl LatencyArgs {
+    fn parse(args: &[String]) -> Result<Self> {
+        Ok(Self {
+            robot_node: arg(
+                args,
+                "--robot-node",
+                "target/release/robot_node".to_string(),
             )?,
-            x,
-            0.9,
-        ));
-        flags.push((
-            StampedWriter::new(
-                &ctx,
-                &node,
-                &topics::machine(j, Leaf::PartReady).ros_name(),
-                Profile::PartReady,
-            )?,
-            j % 2 == 0,
-        ));
+            policy: arg(args, "--policy", String::new())?,
+            n: arg(args, "--n", 200)?,
+            interval: Duration::from_millis(arg(args, "--interval-ms", 100u64)?),
+            warmup_s: arg(args, "--warmup-s", 5.0)?,
+            peers: arg(args, "--peers", 5)?,
+            machines: arg(args, "--machines", 4)?,
+            storages: arg(args, "--storages", 2)?,
+            domain: arg(args, "--domain", 100 + (std::process::id() % 100) as u16)?,
+        })
     }
-    for k in 0..storages {
-        let x = -0.6 + 1.2 * k as f64 / (storages.max(2) - 1) as f64;
-        poses.push((
-            StampedWriter::new(
-                &ctx,
-                &node,
-                &topics::storage(k, Leaf::Pose).ros_name(),
-                Profile::LatchedPose,
-            )?,
-            x,
-            -0.95,
-        ));
-    }
-    for p in 1..=peers {
-        let name = format!("robot_{p}");
-        let x = -0.9 + 1.8 * p as f64 / (peers + 1) as f64;
-        poses.push((
-            StampedWriter::new(
-                &ctx,
-                &node,
-                &topics::robot(&name, Leaf::Pose).ros_name(),
-                Profile::RobotStream,
-            )?,
-            x,
-            0.2,
-        ));
-        flags.push((
-            StampedWriter::new(
-                &ctx,
-                &node,
-                &topics::robot(&name, Leaf::HasPart).ros_name(),
-                Profile::RobotStream,
-            )?,
-            p % 3 == 0,
-        ));
-    }
-    let mut cmd = subscription::<Twist>(
-        &mut node,
-        &topics::robot(me, Leaf::CmdVel).ros_name(),
-        Profile::RobotStream,
-    )?;
-    let ping = StampedWriter::<Twist>::new(&ctx, &node, PING, Profile::RobotStream)?;
-    let mut pong = subscription::<Twist>(&mut node, PONG, Profile::RobotStream)?;
-    let mut poll = Poll::new()?;
-    poll.registry()
-        .register(&mut cmd, Token(0), Interest::READABLE)?;
-    poll.registry()
-        .register(&mut pong, Token(1), Interest::READABLE)?;
-    let mut events = Events::with_capacity(16);
 
+    /// Every run is bounded: warm-up + n slots + slack.
+    fn max_s(&self) -> f64 {
+        self.warmup_s + self.n as f64 * self.interval.as_secs_f64() * 1.5 + 30.0
+    }
+}
+
+/// The bridge's side of the contract for `/robot_0`: every entity's writers and where the
+/// entities are.
+struct StateWriters {
+    own_pose: StampedWriter<PoseStamped>,
+    own_part: StampedWriter<Bool>,
+    flags: Vec<(StampedWriter<Bool>, bool)>,
+    poses: Vec<(StampedWriter<PoseStamped>, f64, f64)>,
+}
+
+impl StateWriters {
+    fn new(ctx: &Context, node: &Node, me: &str, a: &LatencyArgs) -> Result<Self> {
+        let w = |name: String, p: Profile| StampedWriter::new(ctx, node, &name, p);
+        let wb = |name: String, p: Profile| StampedWriter::<Bool>::new(ctx, node, &name, p);
+        let own_pose = w(
+            topics::robot(me, Leaf::Pose).ros_name(),
+            Profile::RobotStream,
+        )?;
+        let own_part = wb(
+            topics::robot(me, Leaf::HasPart).ros_name(),
+            Profile::RobotStream,
+        )?;
+        let mut flags = Vec::new();
+        let mut poses = Vec::new();
+        for j in 0..a.machines {
+            let x = -0.8 + 1.6 * j as f64 / (a.machines.max(2) - 1) as f64;
+            let pose = topics::machine(j, Leaf::Pose).ros_name();
+            poses.push((w(pose, Profile::LatchedPose)?, x, 0.9));
+            let ready = topics::machine(j, Leaf::PartReady).ros_name();
+            flags.push((wb(ready, Profile::PartReady)?, j % 2 == 0));
+        }
+        for k in 0..a.storages {
+            let x = -0.6 + 1.2 * k as f64 / (a.storages.max(2) - 1) as f64;
+            let pose = topics::storage(k, Leaf::Pose).ros_name();
+            poses.push((w(pose, Profile::LatchedPose)?, x, -0.95));
+        }
+        for p in 1..=a.peers {
+            let name = format!("robot_{p}");
+            let x = -0.9 + 1.8 * p as f64 / (a.peers + 1) as f64;
+            let pose = topics::robot(&name, Leaf::Pose).ros_name();
+            poses.push((w(pose, Profile::RobotStream)?, x, 0.2));
+            let part = topics::robot(&name, Leaf::HasPart).ros_name();
+            flags.push((wb(part, Profile::RobotStream)?, p % 3 == 0));
+        }
+        Ok(Self {
+            own_pose,
+            own_part,
+            flags,
+            poses,
+        })
+    }
+
+    /// Publish state k (the robot's own topics last); returns the time after the last write.
+    fn publish(&self, k: i64) -> Instant {
+        let st = Time::from_secs_f64(k as f64 * 0.1);
+        let ns = Some(k * 100_000_000);
+        for (w, x, y) in &self.poses {
+            w.write(PoseStamped::planar(st, "map", *x, *y), ns).ok();
+        }
+        for (w, b) in &self.flags {
+            w.write(Bool { data: *b }, ns).ok();
+        }
+        self.own_part.write(Bool { data: false }, ns).ok();
+        self.own_pose
+            .write(PoseStamped::planar(st, "map", -0.5, -0.5), ns)
+            .ok();
+        Instant::now()
+    }
+}
+
+/// The two replies timed: the robot's cmd_vel (token 0) and the echo's pong (token 1).
+struct Replies {
+    cmd: Subscription<Twist>,
+    pong: Subscription<Twist>,
+    poll: Poll,
+    events: Events,
+}
+
+const CMD: usize = 0;
+const PONG_TOKEN: usize = 1;
+
+impl Replies {
+    fn new(node: &mut Node, me: &str) -> Result<Self> {
+        let cmd_name = topics::robot(me, Leaf::CmdVel).ros_name();
+        let mut cmd = subscription::<Twist>(node, &cmd_name, Profile::RobotStream)?;
+        let mut pong = subscription::<Twist>(node, PONG, Profile::RobotStream)?;
+        let poll = Poll::new()?;
+        poll.registry()
+            .register(&mut cmd, Token(CMD), Interest::READABLE)?;
+        poll.registry()
+            .register(&mut pong, Token(PONG_TOKEN), Interest::READABLE)?;
+        Ok(Self {
+            cmd,
+            pong,
+            poll,
+            events: Events::with_capacity(16),
+        })
+    }
+
+    /// Wait (at most 1 s) for the reply carrying `want` (a stamp key in us) on `which`;
+    /// returns its arrival time.
+    fn wait(&mut self, which: usize, want: i64) -> Option<Instant> {
+        let deadline = Instant::now() + Duration::from_secs(1);
+        loop {
+            let sub = if which == CMD { &self.cmd } else { &self.pong };
+            while let Ok(Some((_, info))) = sub.take() {
+                if stamp_key_info(&info) == Some(want) {
+                    return Some(Instant::now());
+                }
+            }
+            let now = Instant::now();
+            if now >= deadline {
+                return None;
+            }
+            self.poll.poll(&mut self.events, Some(deadline - now)).ok();
+        }
+    }
+}
+
+/// The echo helper and the robot_node under test (lockstep, stats as JSON on stdout).
+fn spawn_peers(a: &LatencyArgs) -> Result<(Kill, Kill)> {
     let exe = std::env::current_exe()?;
-    let _echo = Kill(
+    let echo = Kill(
         Command::new(&exe)
             .args([
                 "echo",
                 "--domain",
-                &domain.to_string(),
+                &a.domain.to_string(),
                 "--max-s",
-                &format!("{}", max_s + 10.0),
+                &format!("{}", a.max_s() + 10.0),
             ])
             .stdin(Stdio::null())
             .stdout(Stdio::null())
             .spawn()
             .context("starting the echo process")?,
     );
-    let mut rn = Command::new(&robot_node);
-    rn.env("ROS_DOMAIN_ID", domain.to_string())
+    let mut rn = Command::new(&a.robot_node);
+    rn.env("ROS_DOMAIN_ID", a.domain.to_string())
         .env("RUST_LOG", "warn")
         .args([
             "--ros-args",
@@ -272,156 +323,180 @@ fn latency(args: &[String]) -> Result<()> {
         .stdin(Stdio::null())
         .stdout(Stdio::piped())
         .stderr(Stdio::inherit());
-    if !policy_path.is_empty() {
-        rn.args(["-p", &format!("policy:={policy_path}")]);
+    if !a.policy.is_empty() {
+        rn.args(["-p", &format!("policy:={}", a.policy)]);
     }
-    let mut robot = Kill(
+    let robot = Kill(
         rn.spawn()
-            .with_context(|| format!("starting {robot_node}"))?,
+            .with_context(|| format!("starting {}", a.robot_node))?,
     );
-    let robot_pid = robot.0.id();
-    let robot_out = robot.0.stdout.take().expect("piped");
+    Ok((echo, robot))
+}
 
-    let t_start = Instant::now();
-    let mut k: i64 = 0;
-    // publish state k; returns the time after the last write
-    let publish_state = |k: i64| -> Instant {
-        let st = Time::from_secs_f64(k as f64 * 0.1);
-        let ns = Some(k * 100_000_000);
-        for (w, x, y) in &poses {
-            w.write(PoseStamped::planar(st, "map", *x, *y), ns).ok();
-        }
-        for (w, b) in &flags {
-            w.write(Bool { data: *b }, ns).ok();
-        }
-        own_part.write(Bool { data: false }, ns).ok();
-        own_pose
-            .write(PoseStamped::planar(st, "map", -0.5, -0.5), ns)
-            .ok();
-        Instant::now()
-    };
-    // wait for the reply carrying `want` (a stamp key in us) on `sub`; returns arrival time
-    let mut wait_reply = |sub_token: usize,
-                          want: i64,
-                          cmd: &Subscription<Twist>,
-                          pong: &Subscription<Twist>|
-     -> Option<Instant> {
-        let deadline = Instant::now() + reply_timeout;
-        loop {
-            let sub = if sub_token == 0 { cmd } else { pong };
-            while let Ok(Some((_, info))) = sub.take() {
-                if stamp_key_info(&info) == Some(want) {
-                    return Some(Instant::now());
-                }
-            }
-            let now = Instant::now();
-            if now >= deadline {
-                return None;
-            }
-            poll.poll(&mut events, Some(deadline - now)).ok();
-        }
-    };
+/// Latencies of one run, in microseconds.
+#[derive(Default)]
+struct Samples {
+    bare: Vec<f64>,
+    first: Vec<f64>,
+    last: Vec<f64>,
+    lost_state: usize,
+    lost_bare: usize,
+}
 
-    // ---- warm-up: discovery on both sides, the robot acting on complete states
-    let mut warm_ok = 0;
-    while t_start.elapsed().as_secs_f64() < warmup_s || warm_ok < 10 {
-        if t_start.elapsed().as_secs_f64() > warmup_s + 30.0 {
-            bail!("robot_node never answered during warm-up ({warm_ok} replies)");
-        }
-        k += 1;
-        publish_state(k);
-        if wait_reply(0, k * 100_000, &cmd, &pong).is_some() {
-            warm_ok += 1;
-        }
-        ping.write(Twist::planar(0.0, 0.0), Some(k * 1000)).ok();
-        wait_reply(1, k, &cmd, &pong);
-        std::thread::sleep(interval);
-    }
-    let pid_stat = |pid: u32| -> Option<u64> {
-        let s = std::fs::read_to_string(format!("/proc/{pid}/stat")).ok()?;
-        let rest = &s[s.rfind(')')? + 2..];
-        let f: Vec<&str> = rest.split_whitespace().collect();
-        Some(f[11].parse::<u64>().ok()? + f[12].parse::<u64>().ok()?)
-    };
-    let cpu0 = pid_stat(robot_pid);
-    let tm0 = Instant::now();
+/// user + system CPU ticks of a process.
+fn cpu_ticks(pid: u32) -> Option<u64> {
+    let s = std::fs::read_to_string(format!("/proc/{pid}/stat")).ok()?;
+    let rest = &s[s.rfind(')')? + 2..];
+    let f: Vec<&str> = rest.split_whitespace().collect();
+    Some(f[11].parse::<u64>().ok()? + f[12].parse::<u64>().ok()?)
+}
 
-    // ---- measurement: per slot one bare round trip, then one state
-    let (mut bare, mut first, mut last) = (Vec::new(), Vec::new(), Vec::new());
-    let (mut lost_state, mut lost_bare) = (0usize, 0usize);
-    let mut next = Instant::now();
-    for i in 0..n {
-        if t_start.elapsed().as_secs_f64() > max_s {
-            bail!("time bound reached after {i} states");
-        }
-        k += 1;
-        let t = Instant::now();
-        ping.write(Twist::planar(0.0, 0.0), Some(k * 1000)).ok();
-        match wait_reply(1, k, &cmd, &pong) {
-            Some(r) => bare.push((r - t).as_secs_f64() * 1e6),
-            None => lost_bare += 1,
-        }
-        std::thread::sleep(interval / 2);
-        let t_first = Instant::now();
-        let t_last = publish_state(k);
-        match wait_reply(0, k * 100_000, &cmd, &pong) {
-            Some(r) => {
-                first.push((r - t_first).as_secs_f64() * 1e6);
-                last.push((r - t_last).as_secs_f64() * 1e6);
-            }
-            None => lost_state += 1,
-        }
-        next += interval;
-        let now = Instant::now();
-        if next > now {
-            std::thread::sleep(next - now);
-        } else {
-            next = now;
-        }
-    }
-    let window = tm0.elapsed().as_secs_f64();
-    let cpu1 = pid_stat(robot_pid);
-    let tck = 100.0; // USER_HZ
-    let cpu_pct = match (cpu0, cpu1) {
-        (Some(a), Some(b)) => (b - a) as f64 / tck / window * 100.0,
-        _ => f64::NAN,
-    };
-    let rss_kb = std::fs::read_to_string(format!("/proc/{robot_pid}/status"))
+fn rss_kb(pid: u32) -> Option<u64> {
+    std::fs::read_to_string(format!("/proc/{pid}/status"))
         .ok()
         .and_then(|s| {
             s.lines()
                 .find(|l| l.starts_with("VmRSS:"))
                 .and_then(|l| l.split_whitespace().nth(1)?.parse::<u64>().ok())
-        });
-    drop(robot); // SIGINT: robot_node prints its final stats line
-    let mut robot_final = serde_json::Value::Null;
-    {
-        use std::io::BufRead;
-        for line in std::io::BufReader::new(robot_out)
-            .lines()
-            .map_while(Result::ok)
-        {
-            if let Ok(v) = serde_json::from_str::<serde_json::Value>(&line) {
-                if v["final"] == true {
-                    robot_final = v;
-                }
+        })
+}
+
+/// robot_node's final stats line (it prints it on SIGINT).
+fn final_counters(out: std::process::ChildStdout) -> serde_json::Value {
+    use std::io::BufRead;
+    let mut last = serde_json::Value::Null;
+    for line in std::io::BufReader::new(out).lines().map_while(Result::ok) {
+        if let Ok(v) = serde_json::from_str::<serde_json::Value>(&line) {
+            if v["final"] == true {
+                last = v;
             }
         }
     }
+    last
+}
+
+/// The bench: the bridge's writers, the robot and the echo, a warm-up, then per slot one
+/// bare round trip and one state; one JSON summary line on stdout.
+struct Latency {
+    a: LatencyArgs,
+    state: StateWriters,
+    ping: StampedWriter<Twist>,
+    replies: Replies,
+    t_start: Instant,
+    /// The last state (and ping) stamp sent.
+    k: i64,
+}
+
+impl Latency {
+    /// Warm-up: discovery on both sides, the robot acting on complete states.
+    fn warm_up(&mut self) -> Result<()> {
+        let mut warm_ok = 0;
+        while self.t_start.elapsed().as_secs_f64() < self.a.warmup_s || warm_ok < 10 {
+            if self.t_start.elapsed().as_secs_f64() > self.a.warmup_s + 30.0 {
+                bail!("robot_node never answered during warm-up ({warm_ok} replies)");
+            }
+            self.k += 1;
+            let k = self.k;
+            self.state.publish(k);
+            if self.replies.wait(CMD, k * 100_000).is_some() {
+                warm_ok += 1;
+            }
+            self.ping
+                .write(Twist::planar(0.0, 0.0), Some(k * 1000))
+                .ok();
+            self.replies.wait(PONG_TOKEN, k);
+            std::thread::sleep(self.a.interval);
+        }
+        Ok(())
+    }
+
+    /// Measurement: per slot one bare round trip, half a slot later one state.
+    fn measure(&mut self) -> Result<Samples> {
+        let mut s = Samples::default();
+        let interval = self.a.interval;
+        let mut next = Instant::now();
+        for i in 0..self.a.n {
+            if self.t_start.elapsed().as_secs_f64() > self.a.max_s() {
+                bail!("time bound reached after {i} states");
+            }
+            self.k += 1;
+            let k = self.k;
+            let t = Instant::now();
+            self.ping
+                .write(Twist::planar(0.0, 0.0), Some(k * 1000))
+                .ok();
+            match self.replies.wait(PONG_TOKEN, k) {
+                Some(r) => s.bare.push((r - t).as_secs_f64() * 1e6),
+                None => s.lost_bare += 1,
+            }
+            std::thread::sleep(interval / 2);
+            let t_first = Instant::now();
+            let t_last = self.state.publish(k);
+            match self.replies.wait(CMD, k * 100_000) {
+                Some(r) => {
+                    s.first.push((r - t_first).as_secs_f64() * 1e6);
+                    s.last.push((r - t_last).as_secs_f64() * 1e6);
+                }
+                None => s.lost_state += 1,
+            }
+            next += interval;
+            let now = Instant::now();
+            if next > now {
+                std::thread::sleep(next - now);
+            } else {
+                next = now;
+            }
+        }
+        Ok(s)
+    }
+}
+
+fn latency(args: &[String]) -> Result<()> {
+    let a = LatencyArgs::parse(args)?;
+    let me = "robot_0";
+    let (ctx, mut node) = node(a.domain, "bench_bridge")?;
+    let state = StateWriters::new(&ctx, &node, me, &a)?;
+    let replies = Replies::new(&mut node, me)?;
+    let ping = StampedWriter::<Twist>::new(&ctx, &node, PING, Profile::RobotStream)?;
+    let (_echo, mut robot) = spawn_peers(&a)?;
+    let robot_pid = robot.0.id();
+    let robot_out = robot.0.stdout.take().expect("piped");
+    let mut bench = Latency {
+        a,
+        state,
+        ping,
+        replies,
+        t_start: Instant::now(),
+        k: 0,
+    };
+    bench.warm_up()?;
+    let cpu0 = cpu_ticks(robot_pid);
+    let tm0 = Instant::now();
+    let mut s = bench.measure()?;
+    let window = tm0.elapsed().as_secs_f64();
+    let cpu_pct = match (cpu0, cpu_ticks(robot_pid)) {
+        (Some(a), Some(b)) => (b - a) as f64 / 100.0 / window * 100.0, // USER_HZ 100
+        _ => f64::NAN,
+    };
+    let rss = rss_kb(robot_pid);
+    drop(robot); // SIGINT: robot_node prints its final stats line
+    let robot_final = final_counters(robot_out);
+    let a = &bench.a;
+    let (first, last, bare) = (&mut s.first, &mut s.last, &mut s.bare);
     let summary = serde_json::json!({
-        "controller": if policy_path.is_empty() { "greedy".to_string() } else { format!("policy:{policy_path}") },
-        "n": n,
-        "interval_ms": interval.as_millis() as u64,
-        "entities": {"machines": machines, "storages": storages, "peers": peers},
-        "samples_per_state": 2 + 2 * machines + storages + 2 * peers,
-        "state_first_write_to_cmd_us": {"p50": pct(&mut first, 0.5), "p99": pct(&mut first, 0.99), "max": pct(&mut first, 1.0), "count": first.len()},
-        "state_last_write_to_cmd_us": {"p50": pct(&mut last, 0.5), "p99": pct(&mut last, 0.99), "max": pct(&mut last, 1.0)},
-        "bare_round_trip_us": {"p50": pct(&mut bare, 0.5), "p99": pct(&mut bare, 0.99), "max": pct(&mut bare, 1.0), "count": bare.len()},
-        "lost_states": lost_state,
-        "lost_bare": lost_bare,
+        "controller": if a.policy.is_empty() { "greedy".to_string() } else { format!("policy:{}", a.policy) },
+        "n": a.n,
+        "interval_ms": a.interval.as_millis() as u64,
+        "entities": {"machines": a.machines, "storages": a.storages, "peers": a.peers},
+        "samples_per_state": 2 + 2 * a.machines + a.storages + 2 * a.peers,
+        "state_first_write_to_cmd_us": {"p50": pct(first, 0.5), "p99": pct(first, 0.99), "max": pct(first, 1.0), "count": first.len()},
+        "state_last_write_to_cmd_us": {"p50": pct(last, 0.5), "p99": pct(last, 0.99), "max": pct(last, 1.0)},
+        "bare_round_trip_us": {"p50": pct(bare, 0.5), "p99": pct(bare, 0.99), "max": pct(bare, 1.0), "count": bare.len()},
+        "lost_states": s.lost_state,
+        "lost_bare": s.lost_bare,
         "robot_node_cpu_pct_one_core": cpu_pct,
         "robot_node_window_s": window,
-        "robot_node_rss_kb": rss_kb,
+        "robot_node_rss_kb": rss,
         "robot_final_counters": robot_final,
     });
     println!("{summary}");
