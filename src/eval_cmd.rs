@@ -43,6 +43,9 @@ pub struct EvalArgs {
     /// runs it).
     #[arg(long, requires = "checkpoint", conflicts_with = "orca_filter")]
     pub no_orca_filter: bool,
+    /// Peer clearance of the ORCA filter, m (greedy-orca keeps its own 0.025).
+    #[arg(long, default_value_t = obs::orca::FILTER_CLEARANCE)]
+    pub filter_clearance: f32,
     /// Scenario config (TOML); default: the simulator's defaults.
     #[arg(long)]
     pub scenario: Option<PathBuf>,
@@ -76,7 +79,11 @@ pub fn run(a: EvalArgs) -> Result<()> {
             let ctrl = if a.shield {
                 Controller::Shielded { actor, sample }
             } else if orca_filter {
-                Controller::Filtered { actor, sample }
+                Controller::Filtered {
+                    actor,
+                    sample,
+                    clearance: a.filter_clearance,
+                }
             } else {
                 Controller::Learned { actor, sample }
             };

@@ -167,7 +167,10 @@ mod tests {
             0.17, 0.0, 0.0, -0.17, 0.0, 0.0, 0.0, 0.17, 0.0, 0.0, -0.17, 0.0,
         ];
         let s = safe_actions(&[0.0, 0.0, 0.0], &[], &[0.9, 0.9], &peers, &p());
-        assert_eq!(s, [true, false, false, false, false, false, false, false, false]);
+        assert_eq!(
+            s,
+            [true, false, false, false, false, false, false, false, false]
+        );
         // a 5-action policy's logits take the first 5 verdicts
         let mut l = [0.1, 3.0, 2.0, 1.0, 0.5];
         assert_eq!(mask_logits(&mut l, &s), 4);

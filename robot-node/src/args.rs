@@ -40,6 +40,8 @@ pub struct Params {
     /// Pass the policy's velocity through ORCA as a safety filter (obs::orca); None: on,
     /// unless `shield` is (safety by default; `orca_filter:=false` for the raw policy).
     pub orca_filter: Option<bool>,
+    /// Peer clearance of that filter, m (`obs::orca::FILTER_CLEARANCE`).
+    pub orca_clearance: f64,
     /// Pick/place reach beyond the robot radius (greedy-orca stops within it); default:
     /// `robot_radius` (the simulator's default reach equals its radius at every scale).
     pub reach: Option<f64>,
@@ -106,6 +108,7 @@ impl Default for Params {
             controller: ControllerKind::Greedy,
             shield: false,
             orca_filter: None,
+            orca_clearance: obs::orca::FILTER_CLEARANCE as f64,
             reach: None,
             control_rate_hz: 10.0,
             use_sim_time: false,
@@ -146,7 +149,7 @@ impl Params {
 
 pub const USAGE: &str = "usage: robot_node [--ros-args -r __ns:=/robot_N [-r __node:=NAME] \
 [-p NAME:=VALUE]... [--params-file FILE.yaml]... [--log-level LEVEL]]
-parameters: policy (path), controller (greedy|greedy-orca|policy), shield (false), orca_filter (true unless shield:=true),
+parameters: policy (path), controller (greedy|greedy-orca|policy), shield (false), orca_filter (true unless shield:=true), orca_clearance (0.04 m),
             control_rate_hz (10),
             use_sim_time (false), reach (= robot_radius),
             k_speed (0.5), stale_timeout_s (1.0), static_stale_timeout_s (= stale_timeout_s, <=0 off),
@@ -247,6 +250,7 @@ fn apply_param(p: &mut Params, name: &str, v: &ParamValue) -> Result<Applied, Ar
             }
         },
         "reach" => p.reach = Some(positive(name, v)?),
+        "orca_clearance" => p.orca_clearance = positive(name, v)?,
         "control_rate_hz" => {
             let hz = positive(name, v)?;
             if hz > 1000.0 {

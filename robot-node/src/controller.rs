@@ -391,7 +391,14 @@ pub(crate) mod tests {
         {
             assert_eq!(action_velocity(Action::from_index(i).unwrap(), 1.0), *v);
         }
-        assert!(Action::from_index(5).is_none());
+        // diagonals (9-action policies) at the same speed, then nothing
+        let d = std::f32::consts::FRAC_1_SQRT_2;
+        assert_eq!(action_velocity(Action::from_index(8).unwrap(), 1.0), [d, d]);
+        assert_eq!(
+            action_velocity(Action::from_index(5).unwrap(), 1.0),
+            [-d, -d]
+        );
+        assert!(Action::from_index(9).is_none());
     }
 
     fn tmp(name: &str) -> std::path::PathBuf {

@@ -62,7 +62,8 @@ pub fn make_controller(p: &Params) -> anyhow::Result<(Box<dyn Controller>, f64)>
             let trained = c.trained_with_orca_filter();
             if p.orca_filter.unwrap_or(!p.shield) {
                 info!("policy commands pass through the ORCA safety filter");
-                c = c.with_orca_filter(crate::controller::orca_params(p))?;
+                let op = crate::controller::orca_params(p).with_clearance(p.orca_clearance as f32);
+                c = c.with_orca_filter(op)?;
             } else if trained {
                 tracing::warn!(
                     "policy {} was trained behind the ORCA filter; running it without \

@@ -40,7 +40,8 @@ fn offline_greedy_orca(setup: Setup, seed: u64, steps: u32) -> (Offline, Env) {
 
 fn offline_filtered(setup: Setup, seed: u64, steps: u32, path: &std::path::Path) -> Offline {
     let mut env = Env::new(ScenarioConfig::default(), setup, seed).unwrap();
-    let mut fleet = sim::baselines::GreedyOrcaFleet::new(&env).unwrap();
+    let mut fleet =
+        sim::baselines::GreedyOrcaFleet::new_filter(&env, obs::orca::FILTER_CLEARANCE).unwrap();
     let k = env.config().task.k_speed;
     let mut pol = policy::Policy::load(path).unwrap();
     let mut states: Vec<_> = (0..env.n_robots()).map(|_| pol.new_state()).collect();

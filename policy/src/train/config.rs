@@ -61,6 +61,9 @@ pub struct TrainConfig {
     /// robot_node `orca_filter:=true` run) before the simulator steps: the policy learns
     /// with the filter as part of its world. PPO still scores the discrete action.
     pub orca_filter: bool,
+    /// Peer clearance of that filter, m (`obs::orca::FILTER_CLEARANCE`; runs before it
+    /// existed used greedy-ORCA's 0.025).
+    pub orca_filter_clearance: f32,
     /// Constrained PPO (PPO-Lagrangian, Ray et al. 2019, as reward shaping): hold the
     /// contact rate (bodies touched per robot-step, all kinds) at this budget with a
     /// Lagrange multiplier that is subtracted per contact from each robot's reward and
@@ -109,6 +112,7 @@ impl Default for TrainConfig {
             save_every: 5,
             shield: false,
             orca_filter: false,
+            orca_filter_clearance: obs::orca::FILTER_CLEARANCE,
             collision_budget: None,
             lagrange_lr: 2.0,
             lagrange_init: 0.0,

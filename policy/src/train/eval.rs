@@ -29,6 +29,8 @@ pub enum Controller {
     Filtered {
         actor: Box<Actor>,
         sample: bool,
+        /// ORCA peer clearance, m (`obs::orca::FILTER_CLEARANCE` by default).
+        clearance: f32,
     },
     Greedy,
     /// Greedy task allocation + ORCA avoidance (`obs::orca`), continuous velocities.
@@ -65,7 +67,10 @@ pub fn run_episode(
     };
     let shield = shield_params(env.sizes(), cfg);
     let mut orca = match ctrl {
-        Controller::GreedyOrca | Controller::Filtered { .. } => Some(GreedyOrcaFleet::new(&env)?),
+        Controller::GreedyOrca => Some(GreedyOrcaFleet::new(&env)?),
+        Controller::Filtered { clearance, .. } => {
+            Some(GreedyOrcaFleet::new_filter(&env, *clearance)?)
+        }
         _ => None,
     };
     let mut vels = Vec::with_capacity(n);

@@ -633,7 +633,8 @@ impl Trainer {
         // One ORCA filter per robot (it keeps the positions it saw last step); rebuilt per
         // rollout because every rollout starts fresh episodes.
         let mut filters: Vec<obs::orca::GreedyOrca> = if cfg.orca_filter {
-            let p = sim::baselines::orca_params(venv.envs()[0].sizes(), &self.scenario);
+            let p = sim::baselines::orca_params(venv.envs()[0].sizes(), &self.scenario)
+                .with_clearance(cfg.orca_filter_clearance);
             let one = obs::orca::GreedyOrca::new(p).map_err(|reason| {
                 TrainError::Config(format!("orca_filter: ORCA parameters: {reason}"))
             })?;
