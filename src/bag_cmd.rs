@@ -11,7 +11,7 @@
 //! * `record`: subscribe to every contract topic found by discovery and write a bag until
 //!   Ctrl-C / SIGTERM (the bag is finalized on both) or `--duration`.
 
-use std::collections::{BTreeMap, HashMap};
+use std::collections::BTreeMap;
 use std::path::PathBuf;
 use std::sync::atomic::Ordering;
 use std::time::{Duration, Instant};
@@ -263,27 +263,7 @@ fn qos_from_yaml(yaml: &str) -> QosProfile {
 
 // ---------------------------------------------------------------------------- metrics
 
-/// What a bag says about an episode, bin by bin.
-struct Row {
-    t: f64,
-    robots_alive: usize,
-    picks: u64,
-    deliveries: u64,
-    reported: BTreeMap<String, String>,
-}
-
-fn robot_of(name: &str, leaf: Leaf) -> Option<String> {
-    match topics::parse_topic(name)? {
-        t if t.leaf == leaf => match t.entity {
-            Entity::Robot(r) => Some(r),
-            _ => None,
-        },
-        _ => None,
-    }
-}
-
 fn metrics(path: &std::path::Path, period: f64) -> Result<()> {
-    anyhow::ensure!(period > 0.0, "--period must be positive");
     let r = BagReader::open(path)?;
     if !r.complete {
         eprintln!(
@@ -292,71 +272,20 @@ fn metrics(path: &std::path::Path, period: f64) -> Result<()> {
             r.stopped_early.as_deref().unwrap_or("?")
         );
     }
-    let Some((t0, t1)) = r.time_range() else {
-        bail!("{} holds no messages", r.path.display());
-    };
-    let period_ns = (period * 1e9) as u64;
-    let bins = ((t1 - t0) / period_ns + 1) as usize;
-    let bin = |t: u64| (((t - t0) / period_ns) as usize).min(bins - 1);
+    let m = bag::metrics(&r, period)?;
+    print_metrics_table(&r.path, &m);
+    print_metrics_totals(&m);
+    Ok(())
+}
 
-    // has_part transitions and pose presence per robot
-    let mut picks = vec![0u64; bins];
-    let mut deliveries = vec![0u64; bins];
-    let mut alive: Vec<std::collections::BTreeSet<String>> = vec![Default::default(); bins];
-    let mut last_flag: HashMap<usize, bool> = HashMap::new();
-    let mut reported: Vec<BTreeMap<String, String>> = vec![BTreeMap::new(); bins];
-    let mut robots_seen = std::collections::BTreeSet::new();
-    let metrics_topic = r.topic_index(topics::METRICS);
-    for m in &r.messages {
-        let t = &r.topics[m.topic_index];
-        let b = bin(m.log_time);
-        if let Some(robot) = robot_of(&t.name, Leaf::HasPart) {
-            let v: Bool = msgs::cdr::decode(&m.data).map_err(|e| anyhow!("{}: {e}", t.name))?;
-            if let Some(prev) = last_flag.insert(m.topic_index, v.data) {
-                match (prev, v.data) {
-                    (false, true) => picks[b] += 1,
-                    (true, false) => deliveries[b] += 1,
-                    _ => {}
-                }
-            }
-            robots_seen.insert(robot);
-        } else if let Some(robot) = robot_of(&t.name, Leaf::Pose) {
-            alive[b].insert(robot.clone());
-            robots_seen.insert(robot);
-        } else if Some(m.topic_index) == metrics_topic {
-            let d: DiagnosticArray =
-                msgs::cdr::decode(&m.data).map_err(|e| anyhow!("{}: {e}", t.name))?;
-            for s in d.status {
-                for kv in s.values {
-                    reported[b].insert(kv.key, kv.value);
-                }
-            }
-        }
-    }
-    let mut rows = Vec::with_capacity(bins);
-    let (mut cp, mut cd) = (0, 0);
-    let mut last_reported = BTreeMap::new();
-    for b in 0..bins {
-        cp += picks[b];
-        cd += deliveries[b];
-        for (k, v) in &reported[b] {
-            last_reported.insert(k.clone(), v.clone());
-        }
-        rows.push(Row {
-            t: b as f64 * period,
-            robots_alive: alive[b].len(),
-            picks: cp,
-            deliveries: cd,
-            reported: last_reported.clone(),
-        });
-    }
-    let has_metrics = metrics_topic.is_some();
-    let p_max: Option<f64> = last_reported.get("p_max").and_then(|v| v.parse().ok());
+/// The bins: from has_part (and poses), next to /tending/metrics when recorded.
+fn print_metrics_table(path: &std::path::Path, m: &bag::BagMetrics) {
+    let has_metrics = m.has_metrics;
     println!(
         "bag {}: {:.1} s, {} robots seen (pose/has_part topics){}",
-        r.path.display(),
-        secs(t1 - t0),
-        robots_seen.len(),
+        path.display(),
+        m.duration_s,
+        m.robots_seen,
         if has_metrics {
             ", /tending/metrics recorded"
         } else {
@@ -377,8 +306,7 @@ fn metrics(path: &std::path::Path, period: f64) -> Result<()> {
         );
     }
     println!();
-    let get = |m: &BTreeMap<String, String>, k: &str| m.get(k).cloned().unwrap_or("-".into());
-    for row in &rows {
+    for row in &m.rows {
         print!(
             "{:>8.1} {:>6} {:>6} {:>10}",
             row.t, row.robots_alive, row.picks, row.deliveries
@@ -394,8 +322,18 @@ fn metrics(path: &std::path::Path, period: f64) -> Result<()> {
         }
         println!();
     }
-    let last = rows.last().expect("at least one bin");
     println!();
+}
+
+fn get(m: &BTreeMap<String, String>, k: &str) -> String {
+    m.get(k).cloned().unwrap_or("-".into())
+}
+
+/// The episode's totals, and where has_part and /tending/metrics disagree.
+fn print_metrics_totals(m: &bag::BagMetrics) {
+    let last = m.last();
+    let last_reported = &last.reported;
+    let p_max: Option<f64> = last_reported.get("p_max").and_then(|v| v.parse().ok());
     println!(
         "total from has_part: {} delivered, {} picked{}",
         last.deliveries,
@@ -410,22 +348,22 @@ fn metrics(path: &std::path::Path, period: f64) -> Result<()> {
             _ => ", MU n/a (no p_max recorded)".into(),
         }
     );
-    if has_metrics {
+    if m.has_metrics {
         println!(
             "total from /tending/metrics: {} delivered, {} collected, {} collisions, MU {}",
-            get(&last_reported, "parts_delivered"),
-            get(&last_reported, "parts_collected"),
-            get(&last_reported, "collisions"),
-            get(&last_reported, "machine_utilization")
+            get(last_reported, "parts_delivered"),
+            get(last_reported, "parts_collected"),
+            get(last_reported, "collisions"),
+            get(last_reported, "machine_utilization")
         );
         // bridges before the per-kind counts recorded only the total
         if last_reported.contains_key("collisions_robot_robot") {
             println!(
                 "collisions by kind from /tending/metrics: robot-robot {}, robot-machine {}, robot-storage {}, robot-wall {}",
-                get(&last_reported, "collisions_robot_robot"),
-                get(&last_reported, "collisions_robot_machine"),
-                get(&last_reported, "collisions_robot_storage"),
-                get(&last_reported, "collisions_robot_wall")
+                get(last_reported, "collisions_robot_robot"),
+                get(last_reported, "collisions_robot_machine"),
+                get(last_reported, "collisions_robot_storage"),
+                get(last_reported, "collisions_robot_wall")
             );
         } else {
             println!("collisions by kind: n/a (recorded by a bridge that reported only totals)");
@@ -444,7 +382,6 @@ fn metrics(path: &std::path::Path, period: f64) -> Result<()> {
     } else {
         println!("collisions: n/a (only /tending/metrics carries them)");
     }
-    Ok(())
 }
 
 // ----------------------------------------------------------------------------- render

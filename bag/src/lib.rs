@@ -9,14 +9,17 @@
 //!   leaves a directory that describes what reached the disk.
 //! * [`BagReader`]: the messages of a bag file or directory, in file order; lenient on
 //!   files cut short (a recorder killed with SIGKILL).
+//! * [`metrics`]: an episode's picks, deliveries, robots and reported metrics, bin by bin.
 //! * [`recover`]: rewrite a cut bag into a complete one holding every message up to the
 //!   last complete chunk.
 
 mod metadata;
+mod metrics;
 mod reader;
 mod writer;
 
 pub use metadata::{BagMetadata, TopicInfo};
+pub use metrics::{metrics, BagMetrics, MetricsRow};
 pub use reader::{recover, BagMessage, BagReader, RecoverReport, TopicSummary};
 pub use writer::{BagWriter, WriterOptions};
 
