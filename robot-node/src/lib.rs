@@ -7,11 +7,13 @@
 //!   and the scripted greedy controller;
 //! - [`tick`]: one control step, DDS-free;
 //! - [`fanout`]: one received sample to every robot a process hosts, DDS-free;
-//! - [`node`]: the ros2-client node (discovery, one reader per topic, timing, cmd_vel);
+//! - [`node`]: the ros2-client node: controllers, context, node and spinner, start-up;
+//! - `event_loop`: discovery, one reader per topic, timing, cmd_vel (one method per phase);
 //! - [`watchdog`]: exit code 75 when start-up or the control loop hangs (the stages it names).
 
 pub mod args;
 pub mod controller;
+mod event_loop;
 pub mod fanout;
 pub mod node;
 pub mod tick;

@@ -1,0 +1,720 @@
+//! The node's event loop (docs/adr/0007-mio-event-loop.md): the hosted robots with their
+//! `cmd_vel` writers, one reader per input topic shared by all of them
+//! (docs/adr/0008-shared-readers.md), and one method per phase: wait, drain, discover,
+//! lockstep, tick (sim time or wall clock), stats, shutdown.
+
+use std::collections::HashSet;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::{Duration, Instant};
+
+use anyhow::{anyhow, Context as _};
+use ros2_client::dds::rustdds::mio1::{Events, Interest, Poll, Token};
+use ros2_client::dds::{Context, Node, NodeLoggingHandle, Subscription};
+use ros2_client::log::LogLevel;
+use ros2_client::rosout;
+use tracing::{debug, info, warn};
+
+use msgs::topics::{self, Leaf};
+use msgs::{Bool, Clock, EntityTopic, PoseStamped, Profile, Twist};
+use ros::{stamp_key_info, subscription, StampedWriter};
+
+use crate::args::Params;
+use crate::fanout::{self, Incoming};
+use crate::node::{retry, RobotSpec};
+use crate::tick::{Brain, Outcome, TickResult};
+use crate::watchdog::{Stage, Watchdog};
+use crate::world::{Counters, DropReason, World, WorldConfig, WriterId};
+
+enum SubKind {
+    Pose(Subscription<PoseStamped>),
+    Flag(Subscription<Bool>),
+}
+
+struct Sub {
+    topic: EntityTopic,
+    kind: SubKind,
+}
+
+const CLOCK_TOKEN: Token = Token(usize::MAX - 1);
+
+/// One hosted robot: its brain (world model, controller, counters), its `cmd_vel` writer
+/// and its timing state.
+struct Hosted {
+    me: String,
+    /// Prefix of its log lines: empty with one robot per process, `robot_3: ` otherwise.
+    tag: String,
+    brain: Brain,
+    cmd: StampedWriter<Twist>,
+    /// Wall clock: when its next tick is due.
+    next_tick: Instant,
+    last_outcome: Option<Outcome>,
+    /// Lockstep: the last state acted on, and the state waited for (since when).
+    last_acted: Option<i64>,
+    pending: Option<(i64, Instant)>,
+}
+
+impl Hosted {
+    fn publish(&mut self, v: [f64; 2], stamp: Option<i64>) {
+        if self
+            .cmd
+            .write(Twist::planar(v[0], v[1]), stamp.map(|us| us * 1000))
+            .is_err()
+        {
+            self.brain.counters.publish_errors += 1;
+        }
+    }
+}
+
+/// Readers are drained when their mio event fires, when a drain stopped at its bound, and
+/// all of them at this period (a safety net: a missed wake-up costs at most this long).
+const SWEEP_PERIOD: Duration = Duration::from_millis(100);
+
+pub(crate) fn run(
+    p: &Params,
+    stop: &AtomicBool,
+    ctx: &Context,
+    node: &mut Node,
+    robots: Vec<RobotSpec>,
+    multi: bool,
+    wd: &Watchdog,
+) -> anyhow::Result<Counters> {
+    let mut l = EventLoop::new(p, stop, ctx, node, robots, multi, wd)?;
+    wd.stage(Stage::Running);
+    while !stop.load(Ordering::SeqCst) {
+        wd.beat();
+        l.wait()?;
+        let t = l.now_s();
+        l.drain(t);
+        l.discover();
+        if p.lockstep {
+            l.lockstep();
+        } else if l.clock_sub.is_some() {
+            l.tick_sim_time();
+        } else {
+            l.tick_wall_clock();
+        }
+        l.stats();
+    }
+    Ok(l.shutdown())
+}
+
+/// The readers of the node: one per input topic, whatever the number of hosted robots,
+/// indexed by their mio token.
+#[derive(Default)]
+struct Readers {
+    subs: Vec<Sub>,
+    /// Topics subscribed to (or being subscribed to).
+    known: HashSet<EntityTopic>,
+    /// Topics already warned about (wrong type, failed subscription): warned once.
+    wrong_type_warned: HashSet<String>,
+    sub_failed_warned: HashSet<EntityTopic>,
+    /// Readers to drain: signalled by mio, or left with samples by a bounded drain.
+    todo: Vec<usize>,
+    leftover: Vec<usize>,
+    drops_seen: u64,
+}
+
+/// The event loop's state: the hosted robots, the readers and the deadlines of each phase.
+struct EventLoop<'a> {
+    p: &'a Params,
+    ctx: &'a Context,
+    node: &'a mut Node,
+    wd: &'a Watchdog,
+    multi: bool,
+    log: NodeLoggingHandle,
+    poll: Poll,
+    events: Events,
+    hosted: Vec<Hosted>,
+    readers: Readers,
+    clock_sub: Option<Subscription<Clock>>,
+    t0: Instant,
+    period: Duration,
+    lockstep_wait: Duration,
+    stats_period: Duration,
+    next_discovery: Instant,
+    next_sweep: Instant,
+    next_stats: Instant,
+    /// Sim time: last tick index = floor(t * rate), and the last clock value.
+    sim_last_index: Option<i64>,
+    sim_last_t: f64,
+}
+
+impl<'a> EventLoop<'a> {
+    /// Start-up: one cmd_vel writer per hosted robot, the readers of their own topics (and
+    /// /clock with `use_sim_time`), the start-up line on rosout.
+    fn new(
+        p: &'a Params,
+        stop: &AtomicBool,
+        ctx: &'a Context,
+        node: &'a mut Node,
+        robots: Vec<RobotSpec>,
+        multi: bool,
+        wd: &'a Watchdog,
+    ) -> anyhow::Result<Self> {
+        wd.stage(Stage::Writers);
+        let hosted = host(p, stop, ctx, node, robots, multi, wd)?;
+        let log = node.logging_handle();
+        let t0 = Instant::now();
+        let stats_period = Duration::from_secs_f64(p.stats_period_s);
+        let mut l = EventLoop {
+            p,
+            ctx,
+            node,
+            wd,
+            multi,
+            log,
+            poll: Poll::new().context("mio poll")?,
+            events: Events::with_capacity(1024),
+            hosted,
+            readers: Readers::default(),
+            clock_sub: None,
+            t0,
+            period: Duration::from_secs_f64(1.0 / p.control_rate_hz),
+            lockstep_wait: Duration::from_secs_f64(p.lockstep_wait_s),
+            stats_period,
+            next_discovery: t0,
+            next_sweep: t0,
+            next_stats: t0 + stats_period,
+            sim_last_index: None,
+            sim_last_t: f64::NEG_INFINITY,
+        };
+        wd.stage(Stage::Subscriptions);
+        l.subscribe_own(stop)?;
+        l.log_start();
+        let n = l.hosted.len();
+        for (i, h) in l.hosted.iter_mut().enumerate() {
+            h.next_tick = t0 + fanout::tick_offset(i, n, l.period);
+        }
+        Ok(l)
+    }
+
+    fn now_s(&self) -> f64 {
+        self.t0.elapsed().as_secs_f64()
+    }
+
+    /// Every hosted robot's own topics, read once for all (another hosted robot's own
+    /// topics are a peer's for the rest), and /clock with `use_sim_time`.
+    fn subscribe_own(&mut self, stop: &AtomicBool) -> anyhow::Result<()> {
+        let own: Vec<EntityTopic> = self
+            .hosted
+            .iter()
+            .flat_map(|h| [Leaf::Pose, Leaf::HasPart].map(|leaf| topics::robot(&h.me, leaf)))
+            .collect();
+        for t in own {
+            self.readers.known.insert(t.clone());
+            let wd = self.wd;
+            retry("own subscription", stop, wd, || self.add_sub(t.clone()))?;
+            fanout::touch(self.hosted.iter_mut().map(|h| &mut h.brain), &t);
+        }
+        if self.p.use_sim_time {
+            let mut s = subscription::<Clock>(self.node, topics::CLOCK, Profile::Clock)?;
+            self.poll
+                .registry()
+                .register(&mut s, CLOCK_TOKEN, Interest::READABLE)?;
+            self.clock_sub = Some(s);
+        }
+        Ok(())
+    }
+
+    /// A reader on `topic` (a pose or a flag), registered with mio under its index.
+    fn add_sub(&mut self, topic: EntityTopic) -> anyhow::Result<()> {
+        let profile = topic
+            .profile()
+            .ok_or_else(|| anyhow!("no profile for {topic:?}"))?;
+        let name = topic.ros_name();
+        let token = Token(self.readers.subs.len());
+        let registry = self.poll.registry();
+        let kind = match topic.leaf {
+            Leaf::Pose => {
+                let mut s = subscription::<PoseStamped>(self.node, &name, profile)?;
+                registry.register(&mut s, token, Interest::READABLE)?;
+                SubKind::Pose(s)
+            }
+            Leaf::HasPart | Leaf::PartReady => {
+                let mut s = subscription::<Bool>(self.node, &name, profile)?;
+                registry.register(&mut s, token, Interest::READABLE)?;
+                SubKind::Flag(s)
+            }
+            Leaf::CmdVel => return Err(anyhow!("robot_node does not subscribe to cmd_vel")),
+        };
+        debug!("subscribed to {name}");
+        self.readers.subs.push(Sub { topic, kind });
+        Ok(())
+    }
+
+    fn log_start(&self) {
+        let p = self.p;
+        let who = if self.multi {
+            format!(
+                "{} hosting {} robots ({} .. {})",
+                p.fully_qualified_name(),
+                self.hosted.len(),
+                self.hosted[0].me,
+                self.hosted[self.hosted.len() - 1].me
+            )
+        } else {
+            p.fully_qualified_name()
+        };
+        rosout!(
+            self.log,
+            LogLevel::Info,
+            "robot_node {} up: domain {}, controller {}, {} Hz ({}), k_speed {} m/s, stale {} s / static {} s",
+            who,
+            p.domain_id,
+            self.hosted[0].brain.controller.name(),
+            p.control_rate_hz,
+            if p.use_sim_time { "sim time from /clock" } else { "wall clock" },
+            p.k_speed,
+            p.stale_timeout_s,
+            p.static_stale_timeout_s
+        );
+    }
+
+    /// Wait for data or the next deadline (at most 100 ms, to notice `stop`; not at all
+    /// when a reader was left with samples).
+    fn wait(&mut self) -> anyhow::Result<()> {
+        let now = Instant::now();
+        let mut deadline = self
+            .next_discovery
+            .min(self.next_stats)
+            .min(self.next_sweep)
+            .min(now + Duration::from_millis(100));
+        for h in &self.hosted {
+            if self.clock_sub.is_none() {
+                deadline = deadline.min(h.next_tick);
+            }
+            if let Some((_, since)) = h.pending {
+                deadline = deadline.min(since + self.lockstep_wait);
+            }
+        }
+        let timeout = if self.readers.leftover.is_empty() {
+            deadline.saturating_duration_since(now)
+        } else {
+            Duration::ZERO
+        };
+        if let Err(e) = self.poll.poll(&mut self.events, Some(timeout)) {
+            if e.kind() != std::io::ErrorKind::Interrupted {
+                return Err(e).context("mio poll");
+            }
+        }
+        Ok(())
+    }
+
+    /// Drain the readers that have data (each sample once, fanned out to every hosted
+    /// robot); every reader at each sweep.
+    fn drain(&mut self, t: f64) {
+        let r = &mut self.readers;
+        r.todo.clear();
+        if Instant::now() >= self.next_sweep {
+            self.next_sweep = Instant::now() + SWEEP_PERIOD;
+            r.todo.extend(0..r.subs.len());
+            r.leftover.clear();
+        } else {
+            r.todo.append(&mut r.leftover);
+            let n = r.subs.len();
+            r.todo
+                .extend(self.events.iter().map(|e| e.token().0).filter(|&i| i < n));
+            r.todo.sort_unstable();
+            r.todo.dedup();
+        }
+        for &i in &r.todo {
+            if drain(&r.subs[i], &mut self.hosted, t, &mut r.drops_seen) {
+                r.leftover.push(i);
+            }
+        }
+    }
+
+    /// At each discovery period: a reader for every newly discovered contract topic.
+    fn discover(&mut self) {
+        let now = Instant::now();
+        if now < self.next_discovery {
+            return;
+        }
+        self.next_discovery = now + Duration::from_secs_f64(self.p.discovery_period_s);
+        for d in self.ctx.discovered_topics() {
+            let Some(topic) = topics::parse_topic(&d.name) else {
+                continue;
+            };
+            if topic.leaf == Leaf::CmdVel || self.readers.known.contains(&topic) {
+                continue;
+            }
+            let expected = topic.msg_def().map(|m| m.dds_name());
+            if expected.as_deref() != Some(d.type_name.as_str()) {
+                if self.readers.wrong_type_warned.insert(d.name.clone()) {
+                    warn!(
+                        "ignoring topic {} of type {} (expected {:?})",
+                        d.name, d.type_name, expected
+                    );
+                }
+                continue;
+            }
+            self.readers.known.insert(topic.clone());
+            self.wd.stage(Stage::DiscoveredSubscription);
+            let added = self.add_sub(topic.clone());
+            self.wd.stage(Stage::Running);
+            match added {
+                Ok(()) => {
+                    fanout::touch(self.hosted.iter_mut().map(|h| &mut h.brain), &topic);
+                    // a new reader may hold samples before its first event is seen
+                    self.readers.leftover.push(self.readers.subs.len() - 1);
+                    info!("discovered {}", topic.ros_name());
+                }
+                Err(e) => {
+                    // transient (e.g. RustDDS's entity channel full while many entities
+                    // are created at once): retried at the next scan
+                    if self.readers.sub_failed_warned.insert(topic.clone()) {
+                        warn!(
+                            "cannot subscribe to {} (will retry): {e:#}",
+                            topic.ros_name()
+                        );
+                    }
+                    self.readers.known.remove(&topic);
+                }
+            }
+        }
+        for h in self.hosted.iter_mut() {
+            h.brain.counters.subscriptions = self.readers.subs.len() as u64;
+        }
+    }
+
+    /// Lockstep: act once per simulator state (docs/adr/0003-lockstep.md).
+    fn lockstep(&mut self) {
+        if let Some(clock) = self.clock_sub.as_ref() {
+            while let Ok(Some(_)) = clock.take() {} // /clock is not used in lockstep
+        }
+        for h in self.hosted.iter_mut() {
+            let now = self.t0.elapsed().as_secs_f64();
+            lockstep_step(h, &self.log, self.lockstep_wait, now);
+        }
+    }
+
+    /// `use_sim_time`: tick every hosted robot when /clock enters a new control period.
+    fn tick_sim_time(&mut self) {
+        let Some(clock) = self.clock_sub.as_ref() else {
+            return;
+        };
+        let mut latest: Option<f64> = None;
+        let mut undecodable = 0u64;
+        loop {
+            match clock.take() {
+                Ok(Some((c, _))) => latest = Some(c.clock.as_secs_f64()),
+                Ok(None) => break,
+                Err(e) => {
+                    debug!("dropped /clock sample: {e:?}");
+                    undecodable += 1;
+                }
+            }
+        }
+        for h in self.hosted.iter_mut() {
+            for _ in 0..undecodable {
+                h.brain.counters.drop(DropReason::Decode);
+            }
+        }
+        let Some(st) = latest else {
+            return;
+        };
+        let went_back = st + 1e-9 < self.sim_last_t;
+        if went_back {
+            info!(
+                "sim time went back ({} -> {st}): resetting controller",
+                self.sim_last_t
+            );
+            self.sim_last_index = None;
+        }
+        self.sim_last_t = st;
+        let idx = (st * self.p.control_rate_hz + 1e-6).floor() as i64;
+        let skipped = match self.sim_last_index {
+            Some(l) if idx > l + 1 => (idx - l - 1) as u64,
+            _ => 0,
+        };
+        let due = self.sim_last_index.is_none_or(|l| idx > l);
+        if due {
+            self.sim_last_index = Some(idx);
+        }
+        let now = self.now_s();
+        for h in self.hosted.iter_mut() {
+            if went_back {
+                h.brain.reset();
+            }
+            h.brain.counters.ticks_missed += skipped;
+            if due {
+                tick_now(h, &self.log, now);
+            }
+        }
+    }
+
+    /// Wall clock: tick each hosted robot whose period is due (their ticks are spread over
+    /// the period, [`fanout::tick_offset`]).
+    fn tick_wall_clock(&mut self) {
+        let period = self.period;
+        for h in self.hosted.iter_mut() {
+            let now = Instant::now();
+            if now < h.next_tick {
+                continue;
+            }
+            let late = now - h.next_tick;
+            let c = &mut h.brain.counters;
+            c.tick_late_max_us = c.tick_late_max_us.max(late.as_micros() as u64);
+            if late > period {
+                // woke more than one period late: the skipped periods are missed ticks
+                c.ticks_missed +=
+                    (late.as_secs_f64() / period.as_secs_f64()).floor().max(1.0) as u64;
+            }
+            h.next_tick += period;
+            if h.next_tick < now {
+                h.next_tick = now + period; // overrun: skip, do not burst
+            }
+            tick_now(h, &self.log, self.t0.elapsed().as_secs_f64());
+        }
+    }
+
+    /// At each stats period: every hosted robot's counters in the log (and on stdout with
+    /// `stats_json`).
+    fn stats(&mut self) {
+        if Instant::now() < self.next_stats {
+            return;
+        }
+        self.next_stats += self.stats_period;
+        for h in &self.hosted {
+            let (m, s, r) = h.brain.world.known();
+            info!(
+                "counters {}: {} | known machines={m} storages={s} peers={r}",
+                h.me, h.brain.counters
+            );
+            if self.p.stats_json {
+                print_stats_json(&h.me, &h.brain.counters, self.t0, false);
+            }
+        }
+    }
+
+    /// Stop every robot (a zero cmd_vel each), report the final counters; their sum.
+    fn shutdown(mut self) -> Counters {
+        let mut total = Counters::default();
+        for h in self.hosted.iter_mut() {
+            h.publish([0.0, 0.0], None);
+            rosout!(
+                self.log,
+                LogLevel::Info,
+                "{}stopping: published zero cmd_vel",
+                h.tag
+            );
+            info!("final counters {}: {}", h.me, h.brain.counters);
+            if self.p.stats_json {
+                print_stats_json(&h.me, &h.brain.counters, self.t0, true);
+            }
+            total.add(&h.brain.counters);
+        }
+        if self.multi {
+            total.subscriptions = self.readers.subs.len() as u64;
+            info!("final counters (all robots): {total}");
+        }
+        // give the reliable writers a moment to deliver the zero commands before teardown
+        let until = Instant::now() + Duration::from_millis(300);
+        while Instant::now() < until {
+            std::thread::sleep(Duration::from_millis(20));
+        }
+        if let Some(mut c) = self.clock_sub.take() {
+            self.poll.registry().deregister(&mut c).ok();
+        }
+        total
+    }
+}
+
+/// The hosted robots: each with its brain and its cmd_vel writer. cmd_vel carries the
+/// stamp of the state it answers as its DDS source timestamp (lockstep); otherwise the
+/// wall clock, like any ROS 2 publisher.
+fn host(
+    p: &Params,
+    stop: &AtomicBool,
+    ctx: &Context,
+    node: &Node,
+    robots: Vec<RobotSpec>,
+    multi: bool,
+    wd: &Watchdog,
+) -> anyhow::Result<Vec<Hosted>> {
+    let wcfg = WorldConfig {
+        stale_timeout_s: p.stale_timeout_s,
+        static_stale_timeout_s: p.static_stale_timeout_s,
+        room: msgs::RoomBounds {
+            half_extent: msgs::validate::ROOM_HALF_EXTENT,
+            margin: p.room_margin,
+        },
+    };
+    let mut hosted: Vec<Hosted> = Vec::with_capacity(robots.len());
+    let placeholder = Instant::now(); // set when the loop starts
+    for (me, controller, k_speed) in robots {
+        let cmd_name = topics::robot(&me, Leaf::CmdVel).ros_name();
+        let cmd: StampedWriter<Twist> = retry("cmd_vel writer", stop, wd, || {
+            StampedWriter::new(ctx, node, &cmd_name, Profile::RobotStream).context("cmd_vel writer")
+        })?;
+        hosted.push(Hosted {
+            tag: if multi {
+                format!("{me}: ")
+            } else {
+                String::new()
+            },
+            brain: Brain::new(World::new(&me, wcfg), controller, k_speed),
+            me,
+            cmd,
+            next_tick: placeholder,
+            last_outcome: None,
+            last_acted: None,
+            pending: None,
+        });
+    }
+    Ok(hosted)
+}
+
+/// Log a change of what a robot's ticks decide (not every tick).
+fn log_outcome(h: &mut Hosted, log: &NodeLoggingHandle, r: &TickResult, what: &str) {
+    if h.last_outcome
+        .as_ref()
+        .is_none_or(|l| !l.same_kind(&r.outcome))
+    {
+        match &r.outcome {
+            Outcome::Command => rosout!(
+                *log,
+                LogLevel::Info,
+                "{}{what}: observation counts {:?}",
+                h.tag,
+                r.counts
+            ),
+            other => rosout!(
+                *log,
+                LogLevel::Warn,
+                "{}commanding zero velocity: {other:?}",
+                h.tag
+            ),
+        }
+    }
+    h.last_outcome = Some(r.outcome.clone());
+}
+
+/// Wall clock or sim time: one control step of `h` now, and its command.
+fn tick_now(h: &mut Hosted, log: &NodeLoggingHandle, now: f64) {
+    let r = h.brain.tick(now);
+    // A command computed from state carries the stamp of the robot's own pose it used (as
+    // in lockstep), so the bridge can tell robots that receive its state from robots that
+    // only send zeros (`robots_on_state`, the fleet's health check); none otherwise.
+    let stamp = match r.outcome {
+        Outcome::Command => h.brain.world.own_pose_stamp(),
+        _ => None,
+    };
+    h.publish(r.velocity, stamp);
+    log_outcome(h, log, &r, "controlling");
+}
+
+/// Lockstep: act once `h`'s own data and every expected entity of the newest state are in
+/// (or after `wait`).
+fn lockstep_step(h: &mut Hosted, log: &NodeLoggingHandle, wait: Duration, now: f64) {
+    let Some(s) = h.brain.world.own_pose_stamp() else {
+        return;
+    };
+    if h.last_acted.is_some_and(|l| s < l) {
+        info!("{}sim time went back: resetting controller", h.tag);
+        h.brain.reset();
+        h.last_acted = None;
+        h.pending = None;
+    }
+    if h.last_acted.is_some_and(|l| s <= l) {
+        return;
+    }
+    let since = match h.pending {
+        Some((ps, since)) if ps == s => since,
+        _ => {
+            let now = Instant::now();
+            h.pending = Some((s, now));
+            now
+        }
+    };
+    let missing = h.brain.world.lockstep_missing(s, h.last_acted, now);
+    let timed_out = since.elapsed() >= wait;
+    if missing == Some(0) || timed_out {
+        if missing != Some(0) {
+            h.brain.counters.lockstep_wait_timeouts += 1;
+            debug!(
+                "{}lockstep: acting on {s} us with {missing:?} entities missing",
+                h.tag
+            );
+        }
+        let r = h.brain.tick_lockstep(s);
+        h.publish(r.velocity, Some(s));
+        h.last_acted = Some(s);
+        h.pending = None;
+        log_outcome(h, log, &r, "controlling (lockstep)");
+    }
+}
+
+/// One machine-readable stats line on stdout (`-p stats_json:=true`).
+fn print_stats_json(me: &str, c: &Counters, t0: Instant, last: bool) {
+    use std::io::Write;
+    let mut v = c.to_json();
+    v["robot"] = me.into();
+    v["uptime_s"] = t0.elapsed().as_secs_f64().into();
+    v["final"] = last.into();
+    let mut out = std::io::stdout().lock();
+    let _ = writeln!(out, "{v}");
+    let _ = out.flush();
+}
+
+/// Take every sample waiting on `sub` (at most 1000: a flood on one topic cannot starve
+/// the loop) and fan each out to every hosted robot. Returns true if the bound was hit
+/// (more may be waiting).
+fn drain(sub: &Sub, hosted: &mut [Hosted], now: f64, drops_seen: &mut u64) -> bool {
+    for _ in 0..1000 {
+        let brains = hosted.iter_mut().map(|h| &mut h.brain);
+        let d = match &sub.kind {
+            SubKind::Pose(s) => match s.take() {
+                Ok(Some((m, info))) => fanout::deliver(
+                    brains,
+                    &sub.topic,
+                    &Incoming::Pose {
+                        msg: &m,
+                        writer: writer_id(&info),
+                    },
+                    now,
+                ),
+                Ok(None) => return false,
+                Err(e) => {
+                    debug!("undecodable sample on {}: {e:?}", sub.topic.ros_name());
+                    fanout::deliver(brains, &sub.topic, &Incoming::Undecodable, now)
+                }
+            },
+            SubKind::Flag(s) => match s.take() {
+                Ok(Some((m, info))) => fanout::deliver(
+                    brains,
+                    &sub.topic,
+                    &Incoming::Flag {
+                        value: m.data,
+                        stamp: stamp_key_info(&info),
+                        writer: writer_id(&info),
+                    },
+                    now,
+                ),
+                Ok(None) => return false,
+                Err(e) => {
+                    debug!("undecodable sample on {}: {e:?}", sub.topic.ros_name());
+                    fanout::deliver(brains, &sub.topic, &Incoming::Undecodable, now)
+                }
+            },
+        };
+        if d.new_writer > 0 {
+            warn!(
+                "{}: the pinned writer's data went stale; now pinned to a new writer",
+                sub.topic.ros_name()
+            );
+        }
+        if let Some(r) = d.reason {
+            if *drops_seen < 20 || drops_seen.is_power_of_two() {
+                warn!("dropped a sample on {}: {r:?}", sub.topic.ros_name());
+            }
+            *drops_seen += 1;
+        }
+    }
+    true
+}
+
+/// The DDS writer a received sample came from (its GUID).
+fn writer_id(info: &ros2_client::message_info::MessageInfo) -> WriterId {
+    info.publisher_gid().to_bytes16()
+}
