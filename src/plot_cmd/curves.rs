@@ -1,0 +1,330 @@
+//! `tending plot curves`: training log.csv files, per model the mean and std over seeds of
+//! each metric against episodes, smoothed within curriculum stages.
+
+use super::*;
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord)]
+pub(super) enum Metric {
+    Reward,
+    Parts,
+    Collisions,
+    Mu,
+}
+
+impl Metric {
+    pub(super) fn parse(s: &str) -> Result<Metric> {
+        Ok(match s.trim() {
+            "reward" | "team_reward" => Metric::Reward,
+            "parts" | "parts_delivered" => Metric::Parts,
+            "collisions" => Metric::Collisions,
+            "mu" | "MU" => Metric::Mu,
+            o => bail!("unknown metric `{o}`: expected reward, parts, collisions or mu"),
+        })
+    }
+    pub(super) fn column(self) -> &'static str {
+        match self {
+            Metric::Reward => "team_reward",
+            Metric::Parts => "parts_delivered",
+            Metric::Collisions => "collisions",
+            Metric::Mu => "mu",
+        }
+    }
+    pub(super) fn title(self) -> &'static str {
+        match self {
+            Metric::Reward => "team reward",
+            Metric::Parts => "parts delivered",
+            Metric::Collisions => "collisions",
+            Metric::Mu => "MU",
+        }
+    }
+    pub(super) fn index(self) -> usize {
+        self as usize
+    }
+}
+
+/// One training run's log.
+#[derive(Debug, Clone)]
+pub(super) struct LogRun {
+    pub(super) path: PathBuf,
+    pub(super) model: String,
+    pub(super) group: Option<String>,
+    pub(super) episodes: Vec<f64>,
+    pub(super) setups: Option<Vec<String>>,
+    /// Per metric (Metric::index), the column if the log has it.
+    pub(super) values: [Option<Vec<f64>>; 4],
+}
+
+pub(super) fn parse_log(path: &Path, text: &str) -> Result<LogRun> {
+    let csv = Csv::parse(path, text)?;
+    let ec = csv.col("episodes")?;
+    csv.col("team_reward")?;
+    let n = csv.rows.len();
+    let episodes = (0..n).map(|i| csv.num(i, ec)).collect::<Result<Vec<_>>>()?;
+    if let Some(i) = (1..n).find(|&i| episodes[i] <= episodes[i - 1]) {
+        bail!(
+            "{}:{}: episodes {} do not increase (previous row {})",
+            path.display(),
+            csv.rows[i].0,
+            episodes[i],
+            episodes[i - 1]
+        );
+    }
+    let setups = csv
+        .opt_col("setup")
+        .map(|c| csv.rows.iter().map(|(_, f)| f[c].clone()).collect());
+    let mut values: [Option<Vec<f64>>; 4] = Default::default();
+    for m in [
+        Metric::Reward,
+        Metric::Parts,
+        Metric::Collisions,
+        Metric::Mu,
+    ] {
+        if let Some(c) = csv.opt_col(m.column()) {
+            values[m.index()] = Some((0..n).map(|i| csv.num(i, c)).collect::<Result<_>>()?);
+        }
+    }
+    let model = model_from_path(path).unwrap_or_else(|| {
+        path.parent()
+            .and_then(|p| p.file_name())
+            .and_then(|f| f.to_str())
+            .unwrap_or("run")
+            .to_string()
+    });
+    Ok(LogRun {
+        path: path.to_path_buf(),
+        model,
+        group: group_from_path(path),
+        episodes,
+        setups,
+        values,
+    })
+}
+
+/// Stage starts (episodes, setup) of a schedule `SETUP:EPISODES,...`.
+pub(super) fn parse_schedule(s: &str) -> Result<Vec<(f64, String)>> {
+    let mut out = vec![];
+    let mut at = 0.0;
+    for part in s.split(',').filter(|p| !p.trim().is_empty()) {
+        let (setup, eps) = part
+            .trim()
+            .split_once(':')
+            .ok_or_else(|| anyhow!("--schedule: `{part}` is not SETUP:EPISODES"))?;
+        if setup_key(setup).is_none() {
+            bail!("--schedule: setup `{setup}` is not N.M_K");
+        }
+        let e: f64 = eps
+            .parse()
+            .map_err(|_| anyhow!("--schedule: `{eps}` is not a number of episodes"))?;
+        out.push((at, setup.to_string()));
+        at += e;
+    }
+    if out.is_empty() {
+        bail!("--schedule is empty");
+    }
+    Ok(out)
+}
+
+/// Stage starts read from a log's setup column: a stage starts where the previous update
+/// ended (log rows carry the episode count at the end of their update).
+pub(super) fn stage_marks(run: &LogRun) -> Vec<(f64, String)> {
+    let Some(setups) = &run.setups else {
+        return vec![];
+    };
+    let mut out = vec![];
+    for i in 0..setups.len() {
+        if i == 0 {
+            out.push((0.0, setups[0].clone()));
+        } else if setups[i] != setups[i - 1] {
+            out.push((run.episodes[i - 1], setups[i].clone()));
+        }
+    }
+    out
+}
+
+/// Index of each point's stage (the last stage start before its end-of-update episode).
+pub(super) fn stage_ids(episodes: &[f64], marks: &[(f64, String)]) -> Vec<usize> {
+    episodes
+        .iter()
+        .map(|&e| {
+            marks
+                .iter()
+                .filter(|(s, _)| *s < e)
+                .count()
+                .saturating_sub(1)
+        })
+        .collect()
+}
+
+/// Trailing moving average of width `w` that restarts at every stage change.
+pub(super) fn smooth_within_stages(xs: &[f64], stage: &[usize], w: usize) -> Vec<f64> {
+    let w = w.max(1);
+    let mut start = 0;
+    (0..xs.len())
+        .map(|i| {
+            if i > 0 && stage[i] != stage[i - 1] {
+                start = i;
+            }
+            let lo = start.max((i + 1).saturating_sub(w));
+            let s = &xs[lo..=i];
+            s.iter().sum::<f64>() / s.len() as f64
+        })
+        .collect()
+}
+
+/// A model's curve: per x (episodes), mean, std and number of runs.
+pub(super) type Curve = Vec<(f64, f64, f64, usize)>;
+
+pub(super) fn aggregate_curves(series: &[(Vec<f64>, Vec<f64>)]) -> Curve {
+    let mut by: BTreeMap<i64, (f64, Vec<f64>)> = BTreeMap::new();
+    for (xs, ys) in series {
+        for (x, y) in xs.iter().zip(ys) {
+            by.entry((x * 1000.0).round() as i64)
+                .or_insert((*x, vec![]))
+                .1
+                .push(*y);
+        }
+    }
+    by.into_values()
+        .map(|(x, ys)| {
+            let (m, s) = mean_std(&ys);
+            (x, m, s, ys.len())
+        })
+        .collect()
+}
+
+pub(super) struct CurveGroup {
+    pub(super) name: Option<String>,
+    pub(super) marks: Vec<(f64, String)>,
+    /// model -> (runs, per metric curve)
+    pub(super) models: Vec<(String, usize, Vec<Curve>)>,
+    pub(super) x_max: f64,
+}
+
+pub(super) fn build_groups(
+    runs: &[LogRun],
+    metrics: &[Metric],
+    schedule: &Option<Vec<(f64, String)>>,
+    smooth: usize,
+) -> Vec<CurveGroup> {
+    let names: BTreeSet<Option<String>> = runs.iter().map(|r| r.group.clone()).collect();
+    let mut names: Vec<Option<String>> = names.into_iter().collect();
+    names.sort_by(|a, b| {
+        a.as_deref()
+            .and_then(setup_key)
+            .cmp(&b.as_deref().and_then(setup_key))
+    });
+    names
+        .into_iter()
+        .map(|name| {
+            let rs: Vec<&LogRun> = runs.iter().filter(|r| r.group == name).collect();
+            let marks: Vec<(f64, String)> = match schedule {
+                Some(s) => s.clone(),
+                None => {
+                    let set: BTreeSet<(i64, String)> = rs
+                        .iter()
+                        .flat_map(|r| stage_marks(r))
+                        .map(|(x, s)| ((x * 1000.0).round() as i64, s))
+                        .collect();
+                    set.into_iter()
+                        .map(|(x, s)| (x as f64 / 1000.0, s))
+                        .collect()
+                }
+            };
+            let mut models: Vec<String> = rs.iter().map(|r| r.model.clone()).collect();
+            models.sort_by_key(|m| model_rank(m));
+            models.dedup();
+            let x_max = rs
+                .iter()
+                .filter_map(|r| r.episodes.last().copied())
+                .fold(1.0, f64::max);
+            let models = models
+                .into_iter()
+                .map(|m| {
+                    let mine: Vec<&&LogRun> = rs.iter().filter(|r| r.model == m).collect();
+                    let curves = metrics
+                        .iter()
+                        .map(|metric| {
+                            let series: Vec<(Vec<f64>, Vec<f64>)> = mine
+                                .iter()
+                                .filter_map(|r| {
+                                    let ys = r.values[metric.index()].as_ref()?;
+                                    let own = stage_marks(r);
+                                    let st = stage_ids(
+                                        &r.episodes,
+                                        if own.is_empty() { &marks } else { &own },
+                                    );
+                                    Some((
+                                        r.episodes.clone(),
+                                        smooth_within_stages(ys, &st, smooth),
+                                    ))
+                                })
+                                .collect();
+                            aggregate_curves(&series)
+                        })
+                        .collect();
+                    (m, mine.len(), curves)
+                })
+                .collect();
+            CurveGroup {
+                name,
+                marks,
+                models,
+                x_max,
+            }
+        })
+        .collect()
+}
+
+pub(super) fn run_curves(a: &CurvesArgs) -> Result<()> {
+    check_inputs(&a.files)?;
+    let metrics: Vec<Metric> = a
+        .metrics
+        .split(',')
+        .map(Metric::parse)
+        .collect::<Result<_>>()?;
+    if metrics.is_empty() {
+        bail!("--metrics: name at least one of reward, parts, collisions, mu");
+    }
+    let schedule = a.schedule.as_deref().map(parse_schedule).transpose()?;
+    let mut runs = vec![];
+    for f in &a.files {
+        let text =
+            std::fs::read_to_string(f).with_context(|| format!("{}: cannot read", f.display()))?;
+        runs.push(parse_log(f, &text)?);
+    }
+    // A panel only for metrics every log has.
+    let metrics: Vec<Metric> = metrics
+        .into_iter()
+        .filter(|m| {
+            let missing: Vec<String> = runs
+                .iter()
+                .filter(|r| r.values[m.index()].is_none())
+                .map(|r| r.path.display().to_string())
+                .collect();
+            if !missing.is_empty() {
+                eprintln!(
+                    "note: no `{}` column in {}: panel left out",
+                    m.column(),
+                    missing.join(", ")
+                );
+            }
+            missing.is_empty()
+        })
+        .collect();
+    let longest = runs.iter().map(|r| r.episodes.len()).max().unwrap_or(1);
+    let smooth = if a.smooth > 0 {
+        a.smooth
+    } else {
+        (longest / 20).max(1)
+    };
+    let groups = build_groups(&runs, &metrics, &schedule, smooth);
+    let how = if smooth > 1 {
+        format!(", moving average of {smooth} updates")
+    } else {
+        String::new()
+    };
+    let subtitle = format!("line: mean over training seeds{how}; band: std over seeds");
+    draw_curves(&groups, &metrics, &a.title, &subtitle, &a.out)?;
+    eprintln!("wrote {}", a.out.display());
+    Ok(())
+}
