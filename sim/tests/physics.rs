@@ -92,7 +92,7 @@ fn nan_and_wrong_count_commands_are_refused_without_moving() {
     let e = env.step_velocities(&[[f32::INFINITY, 0.0]]).unwrap_err();
     assert!(matches!(e, sim::SimError::NonFiniteCommand { .. }));
     assert!(env.step_velocities(&[]).is_err());
-    assert!(env.step_actions(&[7]).is_err());
+    assert!(env.step_actions(&[9]).is_err());
     assert_eq!(env.steps(), 0);
     assert_eq!(env.robots().next().unwrap().pos, [0.0, 0.0]);
 }
