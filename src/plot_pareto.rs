@@ -73,14 +73,25 @@ fn read(files: &[PathBuf]) -> Result<(Vec<String>, Points)> {
     Ok((methods, pts))
 }
 
-const COLOURS: [RGBColor; 6] = [
+/// Twelve colours far enough apart to tell methods apart (an ablation has many).
+const COLOURS: [RGBColor; 12] = [
     RGBColor(200, 40, 40),
     RGBColor(230, 140, 20),
     RGBColor(40, 90, 200),
     RGBColor(30, 150, 60),
     RGBColor(140, 60, 170),
     RGBColor(90, 90, 90),
+    RGBColor(0, 170, 190),
+    RGBColor(240, 60, 170),
+    RGBColor(150, 110, 40),
+    RGBColor(120, 190, 40),
+    RGBColor(20, 30, 100),
+    RGBColor(250, 200, 30),
 ];
+
+/// Legend entries per row of the figure's one legend, and the height of a row.
+const LEGEND_COLS: usize = 3;
+const LEGEND_ROW: u32 = 24;
 
 fn setup_key(s: &str) -> Vec<u64> {
     s.split(['.', '_']).filter_map(|x| x.parse().ok()).collect()
@@ -105,11 +116,16 @@ fn draw(
     let cols = setups.len().clamp(1, 3);
     let rows = setups.len().div_ceil(cols).max(1);
     let (pw, ph) = (420u32, 330u32);
-    let root =
-        BitMapBackend::new(path, (pw * cols as u32, 50 + ph * rows as u32)).into_drawing_area();
+    let legend_h = 16 + LEGEND_ROW * methods.len().div_ceil(LEGEND_COLS).max(1) as u32;
+    let root = BitMapBackend::new(path, (pw * cols as u32, 50 + ph * rows as u32 + legend_h))
+        .into_drawing_area();
     root.fill(&WHITE).map_err(e)?;
     let root = root.titled(title, (chart::FONT, chart::TITLE)).map_err(e)?;
-    let panels = root.split_evenly((rows, cols));
+    // One legend for the figure, below the panels: a legend inside each panel covered
+    // the points once there were more than a few methods.
+    let (grid, legend_area) = root.split_vertically(ph * rows as u32);
+    legend(&legend_area, methods, pw * cols as u32).map_err(e)?;
+    let panels = grid.split_evenly((rows, cols));
     for (setup, area) in setups.iter().zip(panels.iter()) {
         panel(area, setup, methods, &pts[*setup]).map_err(e)?;
     }
@@ -117,7 +133,30 @@ fn draw(
     Ok(())
 }
 
-/// One setup: a point per method (labelled with its parts), legend in the panel.
+/// The figure's legend: a coloured dot and the method's name, `LEGEND_COLS` per row.
+fn legend<DB: DrawingBackend>(
+    area: &DrawingArea<DB, plotters::coord::Shift>,
+    methods: &[String],
+    width: u32,
+) -> Result<(), DrawingAreaErrorKind<DB::ErrorType>> {
+    let col_w = (width / LEGEND_COLS as u32) as i32;
+    for (i, m) in methods.iter().enumerate() {
+        let (x, y) = (
+            20 + col_w * (i % LEGEND_COLS) as i32,
+            8 + (LEGEND_ROW * (i / LEGEND_COLS) as u32) as i32,
+        );
+        let col = COLOURS[i % COLOURS.len()];
+        area.draw(&Circle::new((x, y + 8), 6, col.filled()))?;
+        area.draw(&Text::new(
+            m.as_str(),
+            (x + 14, y),
+            (chart::FONT, chart::LABEL).into_font().color(&chart::INK),
+        ))?;
+    }
+    Ok(())
+}
+
+/// One setup: a point per method (labelled with its parts, coloured as in the legend).
 fn panel<DB: DrawingBackend>(
     area: &DrawingArea<DB, plotters::coord::Shift>,
     setup: &str,
@@ -146,11 +185,8 @@ fn panel<DB: DrawingBackend>(
                     (9, -7),
                     (chart::FONT, chart::TICK).into_font().color(&col),
                 ),
-        ))?
-        .label(m.as_str())
-        .legend(move |(x, y)| Circle::new((x + 8, y), 5, col.filled()));
+        ))?;
     }
-    chart::legend(&mut c)?;
     Ok(())
 }
 
