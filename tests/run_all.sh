@@ -37,18 +37,22 @@ rm -rf "$rdds"
 # tests/interop (launch-scripts install layout + launch file, robot_node and sim_bridge
 # interop over DDS). The virtualenv lives in target/ (ignored), is created if missing and
 # reinstalled only when tests/interop/requirements.txt changes.
+py_sys="$(command -v python3.11 || command -v python3)"
+# ensure_venv DIR REQUIREMENTS: a virtualenv at DIR with REQUIREMENTS installed, created if
+# missing and rebuilt only when the requirements file or the Python version changes.
+ensure_venv() {
+    local dir="$1" req="$2" want
+    want="$(sha256sum "$req" | cut -d' ' -f1) $("$py_sys" -c 'import sys; print(sys.version.split()[0])')"
+    if [ ! -x "$dir/bin/python" ] || [ "$(cat "$dir/.requirements.sha256" 2>/dev/null)" != "$want" ]; then
+        rm -rf "$dir"
+        "$py_sys" -m venv "$dir"
+        "$dir/bin/python" -m pip install --quiet --disable-pip-version-check -r "$req"
+        echo "$want" > "$dir/.requirements.sha256"
+    fi
+}
 echo "== python interop tests (tests/interop)"
 venv="target/interop-venv"
-py_sys="$(command -v python3.11 || command -v python3)"
-stamp="$venv/.requirements.sha256"
-want="$(sha256sum tests/interop/requirements.txt | cut -d' ' -f1) $("$py_sys" -c 'import sys; print(sys.version.split()[0])')"
-if [ ! -x "$venv/bin/python" ] || [ "$(cat "$stamp" 2>/dev/null)" != "$want" ]; then
-    rm -rf "$venv"
-    "$py_sys" -m venv "$venv"
-    "$venv/bin/python" -m pip install --quiet --disable-pip-version-check \
-        -r tests/interop/requirements.txt
-    echo "$want" > "$stamp"
-fi
+ensure_venv "$venv" tests/interop/requirements.txt
 export TENDING_BIN_DIR="${TENDING_BIN_DIR:-$(cd "${CARGO_TARGET_DIR:-target}/release" && pwd)}"
 export RMW_IMPLEMENTATION=rmw_fastrtps_cpp
 unset ROS_LOCALHOST_ONLY ROS_AUTOMATIC_DISCOVERY_RANGE ROS_STATIC_PEERS FASTRTPS_DEFAULT_PROFILES_FILE
@@ -64,15 +68,7 @@ timeout 900 "$venv/bin/python" -m pytest tests/interop -q -rsxR --reruns 1 --rer
 # `mcap` + `mcap-ros2-support` packages (own venv, same reinstall rule).
 echo "== python bag tests (tests/bags)"
 venv_b="target/venv-bags"
-stamp_b="$venv_b/.requirements.sha256"
-want_b="$(sha256sum tests/bags/requirements.txt | cut -d' ' -f1) $("$py_sys" -c 'import sys; print(sys.version.split()[0])')"
-if [ ! -x "$venv_b/bin/python" ] || [ "$(cat "$stamp_b" 2>/dev/null)" != "$want_b" ]; then
-    rm -rf "$venv_b"
-    "$py_sys" -m venv "$venv_b"
-    "$venv_b/bin/python" -m pip install --quiet --disable-pip-version-check \
-        -r tests/bags/requirements.txt
-    echo "$want_b" > "$stamp_b"
-fi
+ensure_venv "$venv_b" tests/bags/requirements.txt
 timeout 600 "$venv_b/bin/python" -m pytest tests/bags -q -rs -p no:cacheprovider
 
 # Python: the `tending` package (python/: PyO3 + maturin) built from the checkout with
@@ -82,15 +78,7 @@ timeout 600 "$venv_b/bin/python" -m pytest tests/bags -q -rs -p no:cacheprovider
 # PettingZoo's API and seed tests, spaces, determinism, equality with `tending sim`.
 echo "== python package tests (python/tests)"
 venv_p="target/venv-python"
-stamp_p="$venv_p/.requirements.sha256"
-want_p="$(sha256sum python/tests/requirements.txt | cut -d' ' -f1) $("$py_sys" -c 'import sys; print(sys.version.split()[0])')"
-if [ ! -x "$venv_p/bin/python" ] || [ "$(cat "$stamp_p" 2>/dev/null)" != "$want_p" ]; then
-    rm -rf "$venv_p"
-    "$py_sys" -m venv "$venv_p"
-    "$venv_p/bin/python" -m pip install --quiet --disable-pip-version-check \
-        -r python/tests/requirements.txt
-    echo "$want_p" > "$stamp_p"
-fi
+ensure_venv "$venv_p" python/tests/requirements.txt
 # PATH: maturin's PEP 517 hook runs the `maturin` binary of the venv.
 PATH="$PWD/$venv_p/bin:$PATH" "$venv_p/bin/python" -m pip install --quiet \
     --disable-pip-version-check --no-build-isolation --force-reinstall --no-deps ./python
