@@ -46,8 +46,9 @@ pub struct FleetArgs {
     pub duration: f64,
     /// Policy for every robot_node: a checkpoint path, `greedy` or `greedy-orca` for the
     /// scripted controllers, or (default) the bundled SMAPPO policy
-    /// policy/pretrained/smappo_6.4_2.safetensors. A checkpoint runs behind the action
-    /// shield with `--robot-param shield:=true`.
+    /// policy/pretrained/smappo_6.4_2.safetensors. A checkpoint runs behind the ORCA
+    /// safety filter by default (`--robot-param orca_filter:=false` for the raw policy),
+    /// or behind the action shield with `--robot-param shield:=true`.
     #[arg(long)]
     pub policy: Option<PathBuf>,
     /// realtime (bridge steps at --rate-hz) or lockstep (reproducible, see docs/adr/0003-lockstep.md).
