@@ -83,27 +83,24 @@ pub struct GreedyOrcaFleet {
 impl GreedyOrcaFleet {
     /// Controllers for every robot of `env` as it is now.
     pub fn new(env: &Env) -> Result<Self, SimError> {
-        Self::with_params(orca_params(env.sizes(), env.config())).map(|one| Self {
-            robots: vec![one.robots[0].clone(); env.n_robots()],
-        })
+        Self::with_params(env, orca_params(env.sizes(), env.config()))
     }
 
     /// Safety filters for every robot of `env`: greedy-ORCA's parameters with the peer
     /// clearance `clearance` (`obs::orca::FILTER_CLEARANCE` by default).
     pub fn new_filter(env: &Env, clearance: f32) -> Result<Self, SimError> {
-        Self::with_params(orca_params(env.sizes(), env.config()).with_clearance(clearance)).map(
-            |one| Self {
-                robots: vec![one.robots[0].clone(); env.n_robots()],
-            },
-        )
+        let p = orca_params(env.sizes(), env.config()).with_clearance(clearance);
+        Self::with_params(env, p)
     }
 
-    fn with_params(p: obs::orca::OrcaParams) -> Result<Self, SimError> {
+    fn with_params(env: &Env, p: obs::orca::OrcaParams) -> Result<Self, SimError> {
         let one = GreedyOrca::new(p).map_err(|reason| SimError::BadConfig {
             field: "greedy-orca".into(),
             reason,
         })?;
-        Ok(Self { robots: vec![one] })
+        Ok(Self {
+            robots: vec![one; env.n_robots()],
+        })
     }
 
     /// Velocity commands for every row of `obs` (rows = robots, in robot order).

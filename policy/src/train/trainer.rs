@@ -642,7 +642,6 @@ impl Trainer {
         } else {
             Vec::new()
         };
-        let mut prefs = vec![[0.0f32; 2]; b];
         let mut vels = vec![[0.0f32; 2]; b];
         let lambda = if cfg.collision_budget.is_some() {
             self.lambda
@@ -703,13 +702,13 @@ impl Trainer {
             } else {
                 let k_speed = self.scenario.task.k_speed;
                 for (r, f) in filters.iter_mut().enumerate() {
-                    prefs[r] = sim::action_to_velocity(acts[r], k_speed).unwrap_or([0.0, 0.0]);
+                    let pref = sim::action_to_velocity(acts[r], k_speed).unwrap_or([0.0, 0.0]);
                     vels[r] = f.filter(
                         step_obs.own_row(r),
                         step_obs.machines_row(r),
                         step_obs.storages_row(r),
                         step_obs.peers_row(r),
-                        prefs[r],
+                        pref,
                     );
                 }
                 venv.step_velocities(&vels)?;
