@@ -13,7 +13,8 @@
 //! guarantee that makes it avoid anything.
 
 use crate::geom::{nearest_on_box, norm};
-use crate::greedy::{greedy_target, GreedyParams};
+use crate::greedy::{greedy_target, GreedyParams, Target};
+use crate::targets;
 use dodgy_2d::{Agent, AvoidanceOptions, Obstacle, Vec2};
 use std::borrow::Cow;
 
@@ -26,6 +27,9 @@ use std::borrow::Cow;
 /// vs 202.4) with 0-0.2 contacts per episode instead of 0.3-6.6; at 100.16_2 it trades
 /// parts for contacts (44.4 vs 58.4 parts, 20 vs 118 contacts). docs/RESULTS.md section 7.
 pub const FILTER_CLEARANCE: f32 = 0.04;
+
+/// Clearance (m) of greedy-ORCA itself (see [`OrcaParams::new`]).
+pub const GREEDY_ORCA_CLEARANCE: f32 = 0.025;
 
 /// Everything [`GreedyOrca`] plans with.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -56,7 +60,7 @@ impl OrcaParams {
             greedy,
             room_half: room_size / 2.0,
             reach,
-            clearance: 0.025,
+            clearance: GREEDY_ORCA_CLEARANCE,
             time_horizon: 0.5,
             obstacle_time_horizon: 0.3,
             max_neighbours: 10,
@@ -150,8 +154,7 @@ impl GreedyOrca {
         self.params.clearance.min(0.4 * self.params.reach)
     }
 
-    /// Greedy's preferred velocity: straight for a point just inside reach of the
-    /// [`greedy_target`] box, at most K_speed; zero with nothing to do.
+    /// Greedy's preferred velocity: [`Self::preferred_towards`] the [`greedy_target`] box.
     pub fn greedy_preferred(
         &self,
         own: &[f32],
@@ -159,30 +162,48 @@ impl GreedyOrca {
         storages: &[f32],
         peers: &[f32],
     ) -> [f32; 2] {
+        let t = greedy_target(own, machines, storages, peers, &self.params.greedy);
+        self.preferred_towards(t)
+    }
+
+    /// A target action's preferred velocity (`crate::targets`): [`Self::preferred_towards`]
+    /// the box it names on this row; zero for "stay" or a box that does not exist.
+    pub fn target_preferred(
+        &self,
+        action: u8,
+        own: &[f32],
+        machines: &[f32],
+        storages: &[f32],
+        peers: &[f32],
+    ) -> [f32; 2] {
+        let t = targets::target(action, own, machines, storages, peers, &self.params.greedy);
+        self.preferred_towards(t)
+    }
+
+    /// Straight for a point just inside reach of `target`, at most K_speed; zero with no
+    /// target or once there.
+    pub fn preferred_towards(&self, target: Option<Target>) -> [f32; 2] {
         let p = &self.params;
         let g = &p.greedy;
         let (r, k, dt) = (g.robot_radius, g.k_speed, g.dt);
-        match greedy_target(own, machines, storages, peers, g) {
-            Some(t) => {
-                let q = nearest_on_box(t.rel, t.half, [0.0, 0.0]);
-                let d = norm(q);
-                // Stop between the box clearance ORCA keeps and the reach: close enough
-                // to pick or place, not so close that ORCA holds the robot off.
-                let stand_off = r + 0.5 * (self.box_clearance() + p.reach);
-                if d <= stand_off {
-                    [0.0, 0.0]
-                } else {
-                    let go = (d - stand_off) / d;
-                    let v = [q[0] * go / dt, q[1] * go / dt];
-                    let s = norm(v);
-                    if s > k {
-                        [v[0] * k / s, v[1] * k / s]
-                    } else {
-                        v
-                    }
-                }
-            }
-            None => [0.0, 0.0],
+        let Some(t) = target else {
+            return [0.0, 0.0];
+        };
+        let q = nearest_on_box(t.rel, t.half, [0.0, 0.0]);
+        let d = norm(q);
+        // Stop between the box clearance ORCA keeps and the reach: close enough to pick
+        // or place, not so close that ORCA holds the robot off.
+        let stand_off = r + 0.5 * (self.box_clearance() + p.reach);
+        if d <= stand_off {
+            return [0.0, 0.0];
+        }
+        let go = (d - stand_off) / d;
+        let v = [q[0] * go / dt, q[1] * go / dt];
+        let s = norm(v);
+        if s > k {
+            [v[0] * k / s, v[1] * k / s]
+        } else {
+            v
         }
     }
 

@@ -197,6 +197,15 @@ impl Actor {
         self.arch.hidden
     }
 
+    /// Add `delta` to the output bias of action `a` (a prior over actions for a fresh
+    /// actor, e.g. `TrainConfig::target_greedy_bias`). Out-of-range `a` is ignored.
+    pub fn add_action_bias(&mut self, a: usize, delta: f32) {
+        if a < self.arch.n_actions {
+            let off = self.head.out.b.off;
+            self.params.data[off + a] += delta;
+        }
+    }
+
     /// Forward over a chunk: `obs` has T*B rows, step-major (row t*B + b); `h0` B x H;
     /// `masks` T*B (0.0 = episode starts at this step: hidden zeroed first).
     /// Returns logits (T*B) x n_actions; activations are kept for [`backward`](Self::backward).

@@ -218,6 +218,12 @@ fn check_arch(a: &ArchConfig) -> Result<(), CheckpointError> {
     if a.d_model > lim || a.hidden > lim || a.n_actions > 256 || a.heads > a.d_model {
         return bad("dimension out of range");
     }
+    if !a.actions.allows(a.n_actions) {
+        return Err(CheckpointError::Architecture(format!(
+            "{} outputs do not fit the action space {:?}",
+            a.n_actions, a.actions
+        )));
+    }
     if !a.d_model.is_multiple_of(a.heads) {
         return bad("d_model is not a multiple of heads");
     }
@@ -675,5 +681,32 @@ mod tests {
         // a policy file is not a trainer state
         save_policy(&p, &a, serde_json::Value::Null).unwrap();
         assert!(load_trainer_state(&p, &mut a2, &mut c2).is_err());
+    }
+}
+
+#[cfg(test)]
+mod action_space_tests {
+    use super::check_arch;
+    use crate::{ActionSpace, ArchConfig};
+
+    /// Outputs must fit what they mean: 5 or 9 moves, 7 targets; a checkpoint written
+    /// before the field existed reads as moves.
+    #[test]
+    fn outputs_must_fit_the_action_space() {
+        let mut a = ArchConfig::smappo();
+        assert!(check_arch(&a).is_ok());
+        a.n_actions = 9;
+        assert!(check_arch(&a).is_ok());
+        a.actions = ActionSpace::Targets;
+        let e = check_arch(&a).unwrap_err().to_string();
+        assert!(e.contains("9 outputs") && e.contains("Targets"), "{e}");
+        a.n_actions = obs::targets::N_TARGET_ACTIONS;
+        assert!(check_arch(&a).is_ok());
+        a.actions = ActionSpace::Moves;
+        assert!(check_arch(&a).is_err());
+        let mut json = serde_json::to_value(ArchConfig::smappo()).unwrap();
+        json.as_object_mut().unwrap().remove("actions");
+        let old: ArchConfig = serde_json::from_value(json).unwrap();
+        assert_eq!(old.actions, ActionSpace::Moves);
     }
 }

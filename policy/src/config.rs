@@ -46,6 +46,30 @@ impl From<obs::FlatLayout> for FlatLayoutConfig {
     }
 }
 
+/// What the actor's outputs mean (`obs::action`, `obs::targets`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum ActionSpace {
+    /// Velocity moves of `obs::action::MOVES`: the paper's 5 axis moves, or 9 with the
+    /// diagonals. Checkpoints from before this field are moves.
+    #[default]
+    Moves,
+    /// `obs::targets`: which box to drive to; the robot drives there straight.
+    Targets,
+}
+
+impl ActionSpace {
+    /// Whether `n` outputs make sense for this space.
+    pub fn allows(self, n: usize) -> bool {
+        match self {
+            ActionSpace::Moves => {
+                n == obs::action::N_AXIS_ACTIONS || n == obs::action::N_ACTIONS_WITH_DIAGONALS
+            }
+            ActionSpace::Targets => n == obs::targets::N_TARGET_ACTIONS,
+        }
+    }
+}
+
 /// Dimensions of an actor/critic pair.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 pub struct ArchConfig {
@@ -57,6 +81,9 @@ pub struct ArchConfig {
     /// MLP / GRU width.
     pub hidden: usize,
     pub n_actions: usize,
+    /// What the `n_actions` outputs mean.
+    #[serde(default)]
+    pub actions: ActionSpace,
     /// MAPPO: padded observation layout (required for MAPPO, absent for SMAPPO).
     pub flat: Option<FlatLayoutConfig>,
     /// MAPPO critic: robots per environment the centralized input is padded to.
@@ -72,6 +99,7 @@ impl ArchConfig {
             heads: 4,
             hidden: 64,
             n_actions: 5,
+            actions: ActionSpace::Moves,
             flat: None,
             max_robots: None,
         }
@@ -85,6 +113,7 @@ impl ArchConfig {
             heads: 4,
             hidden: 64,
             n_actions: 5,
+            actions: ActionSpace::Moves,
             flat: Some(flat.into()),
             max_robots: Some(max_robots),
         }

@@ -22,7 +22,7 @@ pub mod train;
 
 pub use actor::{Actor, ActorLossStats, PpoActorConfig};
 pub use checkpoint::{CheckpointError, CheckpointMeta};
-pub use config::{ArchConfig, FlatLayoutConfig, ModelKind};
+pub use config::{ActionSpace, ArchConfig, FlatLayoutConfig, ModelKind};
 pub use critic::{Critic, ValueLossConfig, ValueLossStats};
 pub use error::PolicyError;
 pub use inference::{ActMode, Policy, PolicyState};

@@ -155,6 +155,9 @@ pub struct PolicyController {
     shield: Option<ShieldParams>,
     /// Pass the action's velocity through ORCA (`-p orca_filter:=true`).
     filter: Option<GreedyOrca>,
+    /// For a policy with target actions (`obs::targets`): turns the chosen box into a
+    /// straight-line velocity (the planner of greedy-ORCA, no filtering).
+    planner: Option<GreedyOrca>,
 }
 
 impl PolicyController {
@@ -173,6 +176,7 @@ impl PolicyController {
                 k_speed: meta_k.unwrap_or(default_k_speed),
                 shield: None,
                 filter: None,
+                planner: None,
             },
             meta_k.is_some(),
         ))
@@ -186,7 +190,21 @@ impl PolicyController {
             k_speed,
             shield: None,
             filter: None,
+            planner: None,
         }
+    }
+
+    /// Whether the policy picks target boxes (`obs::targets`) rather than velocity moves.
+    pub fn has_target_actions(&self) -> bool {
+        self.policy.actor().arch.actions == policy::ActionSpace::Targets
+    }
+
+    /// The planner a target-action policy needs ([`GreedyOrca::target_preferred`]); its
+    /// k_speed is set to the policy's. Ignored by a move policy.
+    pub fn with_target_planner(mut self, mut params: OrcaParams) -> anyhow::Result<Self> {
+        params.greedy.k_speed = self.k_speed;
+        self.planner = Some(GreedyOrca::new(params).map_err(|e| anyhow::anyhow!(e))?);
+        Ok(self)
     }
 
     /// Whether the checkpoint was trained behind the ORCA filter (then it runs behind it
@@ -204,6 +222,7 @@ impl PolicyController {
     }
 
     /// Put the policy behind the action shield (its k_speed is set to the controller's).
+    /// The caller refuses this for a target-action policy ([`Self::has_target_actions`]).
     pub fn with_shield(mut self, mut shield: ShieldParams) -> Self {
         shield.k_speed = self.k_speed;
         self.shield = Some(shield);
@@ -288,7 +307,24 @@ impl Controller for PolicyController {
         }
     }
     fn act(&mut self, obs: &ObsBatch) -> anyhow::Result<[f32; 2]> {
-        let v = action_velocity(self.action(obs)?, self.k_speed);
+        let v = if self.has_target_actions() {
+            let a = self
+                .policy
+                .act(obs, &mut self.state, policy::ActMode::Greedy)?;
+            let planner = self
+                .planner
+                .as_ref()
+                .ok_or_else(|| anyhow::anyhow!("target-action policy without its planner"))?;
+            planner.target_preferred(
+                a,
+                obs.own_row(0),
+                obs.machines_row(0),
+                obs.storages_row(0),
+                obs.peers_row(0),
+            )
+        } else {
+            action_velocity(self.action(obs)?, self.k_speed)
+        };
         Ok(match &mut self.filter {
             Some(f) => f.filter(
                 obs.own_row(0),
@@ -553,6 +589,39 @@ pub(crate) mod tests {
             let w = c.act(&boxed).unwrap();
             assert!(w[0].abs() < 0.25 && w[1].abs() < 0.25, "{w:?}");
         }
+    }
+
+    /// A target-action policy drives straight for the box it picks (here always the
+    /// greedy entry: toward the ready machine at full speed), and refuses to run without
+    /// its planner.
+    #[test]
+    fn target_policy_drives_to_the_chosen_box() {
+        let mut arch = policy::ArchConfig::smappo();
+        arch.d_model = 8;
+        arch.heads = 2;
+        arch.hidden = 8;
+        arch.n_actions = obs::targets::N_TARGET_ACTIONS;
+        arch.actions = policy::ActionSpace::Targets;
+        let mut actor = policy::Actor::new(arch, 1);
+        actor.add_action_bias(obs::targets::TargetAction::Greedy as usize, 1e4);
+        let pol = policy::Policy::from_actor(actor, Default::default());
+        let obs = b(
+            [0.0, 0.0],
+            false,
+            vec![([0.9, 0.0], true)],
+            vec![[-0.9, 0.9]],
+        );
+        let mut bare = PolicyController::from_policy(pol.clone(), 0.5);
+        assert!(bare.has_target_actions());
+        assert!(bare.act(&obs).unwrap_err().to_string().contains("planner"));
+        let op = OrcaParams::new(params(0.5), 2.3, 0.08);
+        let mut c = PolicyController::from_policy(pol, 0.5)
+            .with_target_planner(op)
+            .unwrap()
+            .with_orca_filter(op.with_clearance(obs::orca::FILTER_CLEARANCE))
+            .unwrap();
+        let v = c.act(&obs).unwrap();
+        assert!((v[0] - 0.5).abs() < 1e-3 && v[1].abs() < 1e-3, "{v:?}");
     }
 
     #[test]

@@ -45,6 +45,15 @@ pub fn make_controller(p: &Params) -> anyhow::Result<(Box<dyn Controller>, f64)>
                 anyhow!("controller `policy` needs a checkpoint: -p policy:=PATH")
             })?;
             let (mut c, from_meta) = PolicyController::load(path, p.k_speed as f32)?;
+            if c.has_target_actions() {
+                anyhow::ensure!(
+                    !p.shield,
+                    "policy {} picks target boxes; the action shield (shield:=true) acts on \
+                     velocity moves: use the ORCA filter (the default) instead",
+                    path.display()
+                );
+                c = c.with_target_planner(crate::controller::orca_params(p))?;
+            }
             if p.shield {
                 c = c.with_shield(crate::controller::shield_params(p));
             }

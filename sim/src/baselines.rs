@@ -125,6 +125,33 @@ impl GreedyOrcaFleet {
 }
 
 impl GreedyOrcaFleet {
+    /// Preferred velocities of target actions (`obs::targets`), one per row of `obs`:
+    /// straight for the box each action names, before any filter.
+    pub fn target_velocities(
+        &self,
+        obs: &ObsBatch,
+        actions: &[u8],
+        out: &mut Vec<[f32; 2]>,
+    ) -> Result<(), SimError> {
+        if obs.rows != self.robots.len() || actions.len() != obs.rows {
+            return Err(SimError::WrongCommandCount {
+                expected: self.robots.len(),
+                got: obs.rows.min(actions.len()),
+            });
+        }
+        out.clear();
+        out.extend(self.robots.iter().enumerate().map(|(r, c)| {
+            c.target_preferred(
+                actions[r],
+                obs.own_row(r),
+                obs.machines_row(r),
+                obs.storages_row(r),
+                obs.peers_row(r),
+            )
+        }));
+        Ok(())
+    }
+
     /// ORCA as a safety filter: for every row of `obs`, the velocity nearest to `prefs[r]`
     /// (m/s; e.g. a learned policy's action as a velocity) that avoids what it observes.
     pub fn filter(

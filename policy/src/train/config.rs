@@ -83,6 +83,13 @@ pub struct TrainConfig {
     /// (`obs::action`). Axis moves only make a robot travel |dx| + |dy|, 1.27x the straight
     /// distance on average, which the continuous-velocity baseline does not pay.
     pub diagonal_actions: bool,
+    /// Target actions (`obs::targets`) instead of velocity moves: the policy picks which
+    /// box to drive to from a fixed menu, the robot drives there straight; rollouts step
+    /// the simulator with that velocity (through the ORCA filter when `orca_filter`).
+    pub target_actions: bool,
+    /// Added to the initial logit of the "greedy" target action, so that a fresh policy
+    /// starts close to greedy-ORCA's choices instead of uniform over the menu (0: uniform).
+    pub target_greedy_bias: f32,
 }
 
 impl Default for TrainConfig {
@@ -118,6 +125,8 @@ impl Default for TrainConfig {
             lagrange_init: 0.0,
             critic_warmup_updates: 0,
             diagonal_actions: false,
+            target_actions: false,
+            target_greedy_bias: 0.0,
         }
     }
 }
@@ -166,6 +175,19 @@ impl TrainConfig {
             return Err(format!(
                 "lagrange_init must be >= 0, got {}",
                 self.lagrange_init
+            ));
+        }
+        if self.target_actions && (self.diagonal_actions || self.shield) {
+            return Err(
+                "target_actions cannot be combined with diagonal_actions or shield (those \
+                 act on velocity moves)"
+                    .into(),
+            );
+        }
+        if !self.target_greedy_bias.is_finite() {
+            return Err(format!(
+                "target_greedy_bias must be finite, got {}",
+                self.target_greedy_bias
             ));
         }
         Ok(())

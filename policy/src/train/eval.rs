@@ -66,11 +66,21 @@ pub fn run_episode(
         _ => None,
     };
     let shield = shield_params(env.sizes(), cfg);
+    // Target actions (`obs::targets`) are velocities only through the planner.
+    let targets = actor
+        .as_ref()
+        .is_some_and(|a| a.arch.actions == crate::ActionSpace::Targets);
+    if targets && matches!(ctrl, Controller::Shielded { .. }) {
+        return Err(TrainError::Config(
+            "the action shield acts on velocity moves; this policy has target actions".into(),
+        ));
+    }
     let mut orca = match ctrl {
         Controller::GreedyOrca => Some(GreedyOrcaFleet::new(&env)?),
         Controller::Filtered { clearance, .. } => {
             Some(GreedyOrcaFleet::new_filter(&env, *clearance)?)
         }
+        Controller::Learned { .. } if targets => Some(GreedyOrcaFleet::new(&env)?),
         _ => None,
     };
     let mut vels = Vec::with_capacity(n);
@@ -129,6 +139,16 @@ pub fn run_episode(
                     } as u8;
                 }
             }
+        }
+        if let Some(orca) = orca.as_mut().filter(|_| targets) {
+            orca.target_velocities(&obs, &actions, &mut prefs)?;
+            if matches!(ctrl, Controller::Filtered { .. }) {
+                orca.filter(&obs, &prefs, &mut vels)?;
+                env.step_velocities(&vels)?;
+            } else {
+                env.step_velocities(&prefs)?;
+            }
+            continue;
         }
         if let (Controller::Filtered { .. }, Some(orca)) = (ctrl, orca.as_mut()) {
             let k = cfg.task.k_speed;

@@ -694,3 +694,62 @@ fn diagonal_actions_train_and_evaluate() {
         assert_eq!(m.steps, 40);
     }
 }
+
+/// `target_actions = true`: a 7-action actor whose checkpoint says so; with an
+/// overwhelming bias on the "greedy" entry, evaluated behind the filter at greedy-ORCA's
+/// clearance, it is greedy-ORCA step for step (same metrics), so the menu's first real
+/// entry is the script; raw (no filter) it drives straight and runs too; the shield and
+/// bad combinations are refused.
+#[test]
+fn target_actions_contain_greedy_orca() {
+    let mut t = crowded(TrainConfig {
+        target_actions: true,
+        orca_filter: true,
+        target_greedy_bias: 2.0,
+        ..TrainConfig::default()
+    });
+    assert_eq!(t.actor.arch.n_actions, obs::targets::N_TARGET_ACTIONS);
+    assert_eq!(t.actor.arch.actions, crate::ActionSpace::Targets);
+    let s = t.step().unwrap();
+    assert!(s.policy_loss.is_finite(), "{s:?}");
+    assert!(s.contact_rate < 0.05, "filtered targets: {s:?}");
+    let p = tmp("targets.safetensors");
+    t.save_policy(&p).unwrap();
+    let pol = crate::Policy::load(&p).unwrap();
+    assert_eq!(pol.actor().arch.actions, crate::ActionSpace::Targets);
+
+    let mut always_greedy = pol.actor().clone();
+    always_greedy.add_action_bias(obs::targets::TargetAction::Greedy as usize, 1e4);
+    let mut sc = ScenarioConfig::default();
+    sc.world.episode_steps = 60;
+    let setup = Setup::new(6, 4, 2);
+    let filtered = Controller::Filtered {
+        actor: Box::new(always_greedy.clone()),
+        sample: false,
+        clearance: obs::orca::GREEDY_ORCA_CLEARANCE,
+    };
+    for ep in 0..3 {
+        let a = run_episode(&filtered, &sc, setup, 0, ep).unwrap();
+        let b = run_episode(&Controller::GreedyOrca, &sc, setup, 0, ep).unwrap();
+        assert_eq!(a, b, "episode {ep}");
+    }
+    let raw = Controller::Learned {
+        actor: Box::new(always_greedy),
+        sample: false,
+    };
+    let m = run_episode(&raw, &sc, setup, 0, 0).unwrap();
+    assert!(m.steps == 60 && m.parts_delivered > 0, "{m:?}");
+    let shielded = Controller::Shielded {
+        actor: Box::new(pol.actor().clone()),
+        sample: false,
+    };
+    let e = run_episode(&shielded, &sc, setup, 0, 0).unwrap_err();
+    assert!(e.to_string().contains("target actions"), "{e}");
+    for bad in [
+        "target_actions = true\ndiagonal_actions = true\n",
+        "target_actions = true\nshield = true\n",
+        "target_greedy_bias = inf\n",
+    ] {
+        assert!(TrainConfig::from_toml(bad).is_err(), "{bad}");
+    }
+}

@@ -376,6 +376,12 @@ impl Trainer {
             }
         }
         let mut actor = Actor::new(actor_arch, mix(seed, u64::MAX, 10));
+        if cfg.target_actions {
+            actor.add_action_bias(
+                obs::targets::TargetAction::Greedy as usize,
+                cfg.target_greedy_bias,
+            );
+        }
         let mut critic = Critic::new(critic_arch, mix(seed, u64::MAX, 11));
         actor.opt.cfg.lr = cfg.lr;
         actor.opt.cfg.eps = cfg.opti_eps;
@@ -508,6 +514,10 @@ impl Trainer {
         if cfg.diagonal_actions {
             actor.n_actions = obs::action::N_ACTIONS_WITH_DIAGONALS;
         }
+        if cfg.target_actions {
+            actor.n_actions = obs::targets::N_TARGET_ACTIONS;
+            actor.actions = crate::ActionSpace::Targets;
+        }
         Ok((actor, critic))
     }
 
@@ -632,7 +642,8 @@ impl Trainer {
         let mut bias = vec![0.0f32; self.actor.arch.n_actions];
         // One ORCA filter per robot (it keeps the positions it saw last step); rebuilt per
         // rollout because every rollout starts fresh episodes.
-        let mut filters: Vec<obs::orca::GreedyOrca> = if cfg.orca_filter {
+        // Target actions need the planner for their velocity even without the filter.
+        let mut filters: Vec<obs::orca::GreedyOrca> = if cfg.orca_filter || cfg.target_actions {
             let p = sim::baselines::orca_params(venv.envs()[0].sizes(), &self.scenario)
                 .with_clearance(cfg.orca_filter_clearance);
             let one = obs::orca::GreedyOrca::new(p).map_err(|reason| {
@@ -702,14 +713,22 @@ impl Trainer {
             } else {
                 let k_speed = self.scenario.task.k_speed;
                 for (r, f) in filters.iter_mut().enumerate() {
-                    let pref = sim::action_to_velocity(acts[r], k_speed).unwrap_or([0.0, 0.0]);
-                    vels[r] = f.filter(
+                    let (own, m, s, p) = (
                         step_obs.own_row(r),
                         step_obs.machines_row(r),
                         step_obs.storages_row(r),
                         step_obs.peers_row(r),
-                        pref,
                     );
+                    let pref = if cfg.target_actions {
+                        f.target_preferred(acts[r], own, m, s, p)
+                    } else {
+                        sim::action_to_velocity(acts[r], k_speed).unwrap_or([0.0, 0.0])
+                    };
+                    vels[r] = if cfg.orca_filter {
+                        f.filter(own, m, s, p, pref)
+                    } else {
+                        pref
+                    };
                 }
                 venv.step_velocities(&vels)?;
             }
