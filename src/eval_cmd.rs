@@ -1,7 +1,8 @@
 //! `tending eval`: a checkpoint (or a scripted baseline) over setups and seeds, reported
 //! as the paper does: per seed the mean over its episodes, then mean (std) over seeds.
 
-use crate::report::{self, CsvRow, Numbers};
+use crate::records::{self, EvalResultRecord};
+use crate::report::{self, Numbers};
 use crate::stats::markdown_table;
 use anyhow::{bail, Context, Result};
 use clap::Args;
@@ -129,7 +130,7 @@ pub fn run(a: EvalArgs) -> Result<()> {
                 .with_context(|| format!("evaluate {setup} seed {seed}"))?;
             let eps: Vec<Numbers> = ms.iter().map(|m| Numbers::of(m, setup.robots)).collect();
             let r = Numbers::mean(&eps);
-            csv_rows.push(CsvRow::new(
+            csv_rows.push(EvalResultRecord::new(
                 &label,
                 &setup.to_string(),
                 seed,
@@ -160,7 +161,7 @@ pub fn run(a: EvalArgs) -> Result<()> {
     if let Some(out) = &a.out {
         std::fs::create_dir_all(out)?;
         std::fs::write(out.join("results.md"), &md)?;
-        std::fs::write(out.join("results.csv"), report::csv_text(&csv_rows)?)?;
+        std::fs::write(out.join("results.csv"), records::to_text(&csv_rows)?)?;
         eprintln!("wrote {}/results.md and results.csv", out.display());
     }
     Ok(())

@@ -9,6 +9,7 @@ mod fleet;
 mod plot;
 mod plot_cmd;
 mod plot_pareto;
+mod records;
 mod render;
 mod report;
 mod sim_cmd;

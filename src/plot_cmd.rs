@@ -16,6 +16,7 @@
 //! like a setup (experiment A's `runs/exp/A/<setup>/<model>/seed*`) get a column of panels
 //! per setup.
 
+use crate::records::{self, finite, EvalResultRecord, PaperMuRecord, TrainLogRecord};
 use crate::stats::mean_std;
 use anyhow::{anyhow, bail, Context, Result};
 use clap::{Args, Subcommand};
@@ -95,87 +96,6 @@ pub fn run(a: PlotArgs) -> Result<()> {
         PlotKind::Bars(b) => run_bars(&b),
         PlotKind::Curves(c) => run_curves(&c),
         PlotKind::Pareto(p) => crate::plot_pareto::run(&p),
-    }
-}
-
-// ---------------------------------------------------------------------------------------
-// CSV reading
-
-/// A comma-separated file with a header line (no quoting: the files tending writes).
-#[derive(Debug)]
-struct Csv {
-    path: PathBuf,
-    header: Vec<String>,
-    /// (1-based line number, fields)
-    rows: Vec<(usize, Vec<String>)>,
-}
-
-impl Csv {
-    fn parse(path: &Path, text: &str) -> Result<Csv> {
-        let mut lines = text
-            .lines()
-            .enumerate()
-            .filter(|(_, l)| !l.trim().is_empty());
-        let Some((_, head)) = lines.next() else {
-            bail!("{}: empty file (expected a CSV header)", path.display());
-        };
-        let header: Vec<String> = head.split(',').map(|s| s.trim().to_string()).collect();
-        let mut rows = vec![];
-        for (i, l) in lines {
-            let f: Vec<String> = l.split(',').map(|s| s.trim().to_string()).collect();
-            if f.len() != header.len() {
-                bail!(
-                    "{}:{}: {} fields, the header has {}",
-                    path.display(),
-                    i + 1,
-                    f.len(),
-                    header.len()
-                );
-            }
-            rows.push((i + 1, f));
-        }
-        if rows.is_empty() {
-            bail!("{}: no data rows", path.display());
-        }
-        Ok(Csv {
-            path: path.to_path_buf(),
-            header,
-            rows,
-        })
-    }
-
-    fn col(&self, name: &str) -> Result<usize> {
-        self.opt_col(name).ok_or_else(|| {
-            anyhow!(
-                "{}: no column `{name}` (columns: {})",
-                self.path.display(),
-                self.header.join(",")
-            )
-        })
-    }
-
-    fn opt_col(&self, name: &str) -> Option<usize> {
-        self.header.iter().position(|h| h == name)
-    }
-
-    fn num(&self, row: usize, col: usize) -> Result<f64> {
-        let (line, f) = &self.rows[row];
-        let v: f64 = f[col].parse().map_err(|_| {
-            anyhow!(
-                "{}:{line}: column `{}`: `{}` is not a number",
-                self.path.display(),
-                self.header[col],
-                f[col]
-            )
-        })?;
-        if !v.is_finite() {
-            bail!(
-                "{}:{line}: column `{}` is {v}",
-                self.path.display(),
-                self.header[col]
-            );
-        }
-        Ok(v)
     }
 }
 
@@ -326,18 +246,19 @@ mod tests {
             e.contains("runs/x/eval/results.csv") && e.contains("empty"),
             "{e}"
         );
-        let e = parse_eval(&f, "policy,setup,parts_delivered,collisions\n").unwrap_err();
+        const HEAD: &str = "policy,setup,seed,episodes,parts_delivered,collisions,mu,team_reward\n";
+        let e = parse_eval(&f, HEAD).unwrap_err();
         assert!(e.to_string().contains("no data rows"), "{e}");
         let e = parse_eval(&f, "policy,setup,parts_delivered,collisions\ng,6.4_2,1,2\n")
             .unwrap_err()
             .to_string();
         assert!(
-            e.contains("runs/x/eval/results.csv") && e.contains("`mu`"),
+            e.contains("runs/x/eval/results.csv") && e.contains("`seed`"),
             "{e}"
         );
         let e = parse_eval(
             &f,
-            "policy,setup,parts_delivered,collisions,mu\ng,6.4_2,1,2,0.1\ng,6.4_2,x,2,0.1\n",
+            &format!("{HEAD}g,6.4_2,0,1,1,2,0.1,0\ng,6.4_2,1,1,x,2,0.1,0\n"),
         )
         .unwrap_err()
         .to_string();
@@ -345,16 +266,23 @@ mod tests {
             e.contains("results.csv:3") && e.contains("parts_delivered"),
             "{e}"
         );
-        let e = parse_eval(
-            &f,
-            "policy,setup,parts_delivered,collisions,mu\ng,6.4_2,1,2\n",
+        let e = parse_eval(&f, &format!("{HEAD}g,6.4_2,0,1,1,2,NaN,0\n"))
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("results.csv:2") && e.contains("`mu` is NaN"),
+            "{e}"
+        );
+        let e = parse_eval(&f, &format!("{HEAD}g,6.4_2,0,1,1,2,0.1\n"))
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("results.csv:2") && e.contains("7 fields"), "{e}");
+        let e = parse_log(
+            &p("r/log.csv"),
+            &log(&["6.4_2", "6.4_2"], &[1.0, 2.0]).replace("\n2,16,", "\n2,8,"),
         )
         .unwrap_err()
         .to_string();
-        assert!(e.contains("results.csv:2") && e.contains("4 fields"), "{e}");
-        let e = parse_log(&p("r/log.csv"), "episodes,team_reward\n8,1\n8,2\n")
-            .unwrap_err()
-            .to_string();
         assert!(e.contains("r/log.csv:3") && e.contains("increase"), "{e}");
         let missing = BarsArgs {
             files: vec![p("/nonexistent/results.csv")],
@@ -388,12 +316,23 @@ mod tests {
         assert_eq!(m[&("2.2_2".to_string(), "smappo".to_string())], 0.5);
     }
 
+    /// A log.csv of 8 episodes per update, as `tending train` writes it.
     fn log(setups: &[&str], rewards: &[f64]) -> String {
-        let mut s = String::from("update,episodes,setup,team_reward,parts_delivered,mu\n");
-        for (i, (st, r)) in setups.iter().zip(rewards).enumerate() {
-            s += &format!("{},{},{st},{r},{},{}\n", i + 1, (i + 1) * 8, r.abs(), 0.1);
-        }
-        s
+        let rows: Vec<TrainLogRecord> = setups
+            .iter()
+            .zip(rewards)
+            .enumerate()
+            .map(|(i, (st, r))| TrainLogRecord {
+                update: i as u64 + 1,
+                episodes: (i as u64 + 1) * 8,
+                setup: st.to_string(),
+                team_reward: *r,
+                parts_delivered: r.abs(),
+                mu: 0.1,
+                ..Default::default()
+            })
+            .collect();
+        records::to_text(&rows).unwrap()
     }
 
     #[test]
@@ -418,7 +357,7 @@ mod tests {
         assert!(parse_schedule("6.4_2").is_err());
         let st = stage_ids(&r.episodes, &marks);
         assert_eq!(st, vec![0, 0, 1, 1, 2]);
-        let ys = r.values[Metric::Reward.index()].as_ref().unwrap();
+        let ys = &r.values[Metric::Reward.index()];
         assert_eq!(
             smooth_within_stages(ys, &st, 3),
             vec![-10.0, -15.0, -30.0, -40.0, -70.0]
@@ -489,7 +428,7 @@ mod tests {
         let mut logs = vec![];
         for s in ["6.4_2", "8.6_2", "10.6_4", "12.8_4"] {
             let l = sub(&format!("A/{s}/smappo/seed0")).join("log.csv");
-            std::fs::write(&l, "episodes,team_reward,mu\n8,-5,0.1\n16,-3,0.2\n").unwrap();
+            std::fs::write(&l, log(&[s, s], &[-5.0, -3.0])).unwrap();
             logs.push(l);
         }
         let out = dir.join("out/A_curves.png");

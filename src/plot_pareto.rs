@@ -3,10 +3,10 @@
 //! Up and to the left is better; the points a method can be compared on are in one panel.
 
 use crate::chart;
-use anyhow::{bail, Context, Result};
+use crate::records::{self, EvalResultRecord};
+use anyhow::{anyhow, bail, Result};
 use clap::Args;
 use plotters::prelude::*;
-use serde::Deserialize;
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
@@ -22,15 +22,6 @@ pub struct ParetoArgs {
     pub title: String,
 }
 
-/// The columns of results.csv this plot reads (others are ignored).
-#[derive(Debug, Deserialize)]
-struct Row {
-    policy: String,
-    setup: String,
-    parts_delivered: f64,
-    contacts_per_robot_step: f64,
-}
-
 /// (method, setup) -> (mean parts, mean contacts per robot-step) over the file's rows.
 type Points = BTreeMap<String, BTreeMap<String, (f64, f64)>>;
 
@@ -38,25 +29,19 @@ fn read(files: &[PathBuf]) -> Result<(Vec<String>, Points)> {
     let mut methods = vec![];
     let mut pts: Points = BTreeMap::new();
     for f in files {
-        let mut r = csv::Reader::from_path(f).with_context(|| format!("read {}", f.display()))?;
         let mut sums: BTreeMap<String, (f64, f64, f64)> = BTreeMap::new();
         let mut method = None;
-        for (i, row) in r.deserialize::<Row>().enumerate() {
-            let row = row.with_context(|| {
-                format!(
-                    "{} row {}: needs policy, setup, parts_delivered, \
-                     contacts_per_robot_step (a results.csv of this tending version)",
-                    f.display(),
-                    i + 2
+        for records::Line { line, record: row } in records::read::<EvalResultRecord>(f)? {
+            let contacts = row.contacts_per_robot_step.ok_or_else(|| {
+                anyhow!(
+                    "{}:{line}: no contacts_per_robot_step (a results.csv written before \
+                     the contact rates; rerun `tending eval`)",
+                    f.display()
                 )
             })?;
             method.get_or_insert(row.policy.clone());
             let e = sums.entry(row.setup).or_default();
-            *e = (
-                e.0 + row.parts_delivered,
-                e.1 + row.contacts_per_robot_step,
-                e.2 + 1.0,
-            );
+            *e = (e.0 + row.parts_delivered, e.1 + contacts, e.2 + 1.0);
         }
         let Some(m) = method else {
             bail!("{}: no data rows", f.display());
@@ -200,18 +185,22 @@ mod tests {
         std::fs::create_dir_all(&dir).unwrap();
         let a = dir.join("a.csv");
         let b = dir.join("b.csv");
-        let head =
-            "policy,setup,seed,episodes,parts_delivered,collisions,contacts_per_robot_step,mu\n";
-        std::fs::write(
+        let row = |policy: &str, seed, parts, contacts| EvalResultRecord {
+            policy: policy.into(),
+            setup: "6.4_2".into(),
+            seed,
+            parts_delivered: parts,
+            contacts_per_robot_step: Some(contacts),
+            ..Default::default()
+        };
+        let write = |p: &PathBuf, rows: &[EvalResultRecord]| {
+            std::fs::write(p, records::to_text(rows).unwrap()).unwrap()
+        };
+        write(
             &a,
-            format!("{head}greedy,6.4_2,0,2,20,4,0.01,0.5\ngreedy,6.4_2,1,2,30,6,0.03,0.6\n"),
-        )
-        .unwrap();
-        std::fs::write(
-            &b,
-            format!("{head}smappo (x.safetensors),6.4_2,0,2,35,300,0.25,0.8\n"),
-        )
-        .unwrap();
+            &[row("greedy", 0, 20.0, 0.01), row("greedy", 1, 30.0, 0.03)],
+        );
+        write(&b, &[row("smappo (x.safetensors)", 0, 35.0, 0.25)]);
         let (methods, pts) = read(&[a.clone(), b.clone()]).unwrap();
         assert_eq!(methods, ["greedy", "smappo"]);
         assert_eq!(pts["6.4_2"]["greedy"], (25.0, 0.02));
@@ -223,11 +212,13 @@ mod tests {
         })
         .unwrap();
         assert!(std::fs::metadata(&out).unwrap().len() > 1000);
-        // A file without the per-robot-step column is refused with its name.
-        let old = dir.join("old.csv");
-        std::fs::write(&old, "policy,setup,parts_delivered\ng,6.4_2,3\n").unwrap();
+        // A results.csv of before the contact rates is refused with its name.
+        let old = Path::new(env!("CARGO_MANIFEST_DIR")).join("docs/results/greedy_6.4_2.csv");
         let err = format!("{:#}", read(&[old]).unwrap_err());
-        assert!(err.contains("old.csv"), "{err}");
+        assert!(
+            err.contains("greedy_6.4_2.csv:2") && err.contains("contacts"),
+            "{err}"
+        );
         std::fs::remove_dir_all(&dir).ok();
     }
 }

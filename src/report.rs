@@ -1,9 +1,9 @@
 //! The numbers `tending sim` and `tending eval` report, one definition for both: parts,
 //! contacts by kind (robot-robot, robot-machine, robot-storage, robot-wall), contacts per
-//! robot-step, MU and team reward; the Markdown columns and the typed CSV record.
+//! robot-step, MU and team reward; the Markdown columns (the CSV record is
+//! [`crate::records::EvalResultRecord`]).
 
 use crate::stats::fmt_ms;
-use serde::Serialize;
 use sim::Metrics;
 
 /// One run's (or one mean's) numbers. Contacts follow `sim::Metrics`: per robot per step,
@@ -116,57 +116,6 @@ pub fn cells(xs: &[Numbers]) -> Vec<String> {
     ]
 }
 
-/// One row of `tending eval`'s results.csv: the mean over the episodes of one seed. Column
-/// names are what `tending plot` and bench/experiments read. (Flat fields: the csv crate
-/// cannot serialize a flattened struct.)
-#[derive(Debug, Clone, Serialize)]
-pub struct CsvRow {
-    pub policy: String,
-    pub setup: String,
-    pub seed: u64,
-    pub episodes: u64,
-    pub parts_delivered: f64,
-    pub collisions: f64,
-    pub collisions_robot_robot: f64,
-    pub collisions_robot_machine: f64,
-    pub collisions_robot_storage: f64,
-    pub collisions_robot_wall: f64,
-    pub contacts_per_robot_step: f64,
-    pub robot_robot_per_robot_step: f64,
-    pub mu: f64,
-    pub team_reward: f64,
-}
-
-impl CsvRow {
-    pub fn new(policy: &str, setup: &str, seed: u64, episodes: u64, n: &Numbers) -> Self {
-        Self {
-            policy: policy.to_string(),
-            setup: setup.to_string(),
-            seed,
-            episodes,
-            parts_delivered: n.parts_delivered,
-            collisions: n.collisions,
-            collisions_robot_robot: n.collisions_robot_robot,
-            collisions_robot_machine: n.collisions_robot_machine,
-            collisions_robot_storage: n.collisions_robot_storage,
-            collisions_robot_wall: n.collisions_robot_wall,
-            contacts_per_robot_step: n.contacts_per_robot_step,
-            robot_robot_per_robot_step: n.robot_robot_per_robot_step,
-            mu: n.mu,
-            team_reward: n.team_reward,
-        }
-    }
-}
-
-/// The CSV text of `rows` (header from the field names).
-pub fn csv_text(rows: &[CsvRow]) -> anyhow::Result<String> {
-    let mut w = csv::Writer::from_writer(vec![]);
-    for r in rows {
-        w.serialize(r)?;
-    }
-    Ok(String::from_utf8(w.into_inner()?)?)
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -200,24 +149,12 @@ mod tests {
     }
 
     #[test]
-    fn mean_and_csv_columns() {
+    fn mean_of_episodes() {
         let a = Numbers::of(&metrics(), 5);
         let mut m2 = metrics();
         m2.parts_delivered = 5;
         let b = Numbers::of(&m2, 5);
         assert_eq!(Numbers::mean(&[a, b]).parts_delivered, 4.0);
         assert_eq!(Numbers::mean(&[]), Numbers::default());
-        let text = csv_text(&[CsvRow::new("greedy", "6.4_2", 1, 2, &a)]).unwrap();
-        let header = text.lines().next().unwrap();
-        assert!(header.starts_with("policy,setup,seed,episodes,parts_delivered,collisions,"));
-        for c in [
-            "collisions_robot_robot",
-            "collisions_robot_wall",
-            "mu",
-            "team_reward",
-        ] {
-            assert!(header.split(',').any(|h| h == c), "{header}");
-        }
-        assert_eq!(text.lines().count(), 2);
     }
 }

@@ -8,10 +8,11 @@
 //! column holds each update's draw.
 
 use crate::plot::{plot_training, CurvePoint};
+use crate::records::{self, TrainLogRecord};
 use anyhow::{anyhow, bail, Context, Result};
 use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
-use policy::train::{parse_curriculum, SetupRange, Stage, TrainConfig, Trainer, UpdateStats};
+use policy::train::{parse_curriculum, SetupRange, Stage, TrainConfig, Trainer};
 use policy::ModelKind;
 use std::io::Write;
 use std::path::{Path, PathBuf};
@@ -71,10 +72,6 @@ pub struct TrainArgs {
     pub quiet: bool,
 }
 
-const LOG_HEADER: &str = "update,episodes,agent_steps,stage,setup,team_reward,parts_delivered,\
-collisions,mu,policy_loss,value_loss,entropy,approx_kl,clip_frac,actor_grad_norm,\
-critic_grad_norm,rollout_secs,train_secs,wall_secs,agent_steps_per_sec,contact_rate,lambda";
-
 /// `--randomize`: the range, and the episode budget when given.
 fn range_from_args(a: &TrainArgs) -> Result<Option<(SetupRange, Option<u64>)>> {
     let Some(r) = &a.randomize else {
@@ -102,78 +99,37 @@ fn schedule_from_args(a: &TrainArgs) -> Result<Option<Vec<Stage>>> {
     Ok(Some(parse_curriculum(&format!("{setup}:{episodes}"))?))
 }
 
-/// Lines of an existing log up to (and including) `update`; the wall time reached.
-fn read_log(path: &Path, update: u64) -> Result<(Vec<String>, f64)> {
-    let text = std::fs::read_to_string(path).unwrap_or_default();
-    let mut keep = vec![];
-    let mut wall = 0.0;
-    for line in text.lines().skip(1) {
-        let f: Vec<&str> = line.split(',').collect();
-        let Some(u) = f.first().and_then(|u| u.parse::<u64>().ok()) else {
-            continue;
-        };
-        if u <= update {
-            wall = f.get(18).and_then(|w| w.parse().ok()).unwrap_or(wall);
-            keep.push(line.to_string());
-        }
+/// The rows of an existing log up to (and including) `update`; the wall time reached.
+/// No log yet is an empty one.
+fn read_log(path: &Path, update: u64) -> Result<(Vec<TrainLogRecord>, f64)> {
+    if !path.exists() {
+        return Ok((vec![], 0.0));
     }
+    let keep: Vec<TrainLogRecord> = records::read::<TrainLogRecord>(path)?
+        .into_iter()
+        .map(|l| l.record)
+        .filter(|r| r.update <= update)
+        .collect();
+    let wall = keep.last().map_or(0.0, |r| r.wall_secs);
     Ok((keep, wall))
 }
 
-/// Curve points and stage-change episodes from log lines.
-pub fn curve_from_log(lines: &[String]) -> (Vec<CurvePoint>, Vec<f64>) {
-    let mut pts = vec![];
+/// Curve points and stage-change episodes of a log.
+pub fn curve_from_log(rows: &[TrainLogRecord]) -> (Vec<CurvePoint>, Vec<f64>) {
+    let mut pts: Vec<CurvePoint> = vec![];
     let mut stages = vec![];
-    let mut last_stage: Option<String> = None;
-    for l in lines {
-        let f: Vec<&str> = l.split(',').collect();
-        if f.len() < 9 {
-            continue;
+    for (i, r) in rows.iter().enumerate() {
+        if i > 0 && r.stage != rows[i - 1].stage {
+            // the stage began one update before this point's episode count
+            stages.push(pts.last().map_or(0.0, |p| p.episodes));
         }
-        let num = |i: usize| f[i].parse::<f64>().unwrap_or(f64::NAN);
-        let (eps, stage) = (num(1), f[3].to_string());
-        if let Some(s) = &last_stage {
-            if *s != stage {
-                // the stage began one update before this point's episode count
-                stages.push(pts.last().map(|p: &CurvePoint| p.episodes).unwrap_or(0.0));
-            }
-        }
-        last_stage = Some(stage);
         pts.push(CurvePoint {
-            episodes: eps,
-            reward: num(5),
-            mu: num(8),
+            episodes: r.episodes as f64,
+            reward: r.team_reward,
+            mu: r.mu,
         });
     }
     (pts, stages)
-}
-
-fn log_line(s: &UpdateStats, wall: f64, sps: f64) -> String {
-    format!(
-        "{},{},{},{},{},{:.4},{:.4},{:.4},{:.5},{:.6},{:.6},{:.6},{:.6},{:.5},{:.5},{:.5},{:.4},{:.4},{:.3},{:.1},{:.5},{:.4}",
-        s.update,
-        s.episodes,
-        s.agent_steps,
-        s.stage,
-        s.setup,
-        s.team_reward,
-        s.parts_delivered,
-        s.collisions,
-        s.mu,
-        s.policy_loss,
-        s.value_loss,
-        s.entropy,
-        s.approx_kl,
-        s.clip_frac,
-        s.actor_grad_norm,
-        s.critic_grad_norm,
-        s.rollout_secs,
-        s.train_secs,
-        wall,
-        sps,
-        s.contact_rate,
-        s.lambda
-    )
 }
 
 fn write_atomic(path: &Path, text: &str) -> Result<()> {
@@ -183,10 +139,10 @@ fn write_atomic(path: &Path, text: &str) -> Result<()> {
     Ok(())
 }
 
-fn save_all(t: &Trainer, out: &Path, lines: &[String]) -> Result<()> {
+fn save_all(t: &Trainer, out: &Path, log: &[TrainLogRecord]) -> Result<()> {
     t.save_policy(&out.join("policy.safetensors"))?;
     t.save_state(&out.join("trainer_state.safetensors"))?;
-    let (pts, stages) = curve_from_log(lines);
+    let (pts, stages) = curve_from_log(log);
     plot_training(&pts, &stages, &out.join("curve.png"))?;
     Ok(())
 }
@@ -272,7 +228,7 @@ pub fn run(a: TrainArgs) -> Result<()> {
         }
         t
     };
-    let (mut lines, mut wall) = if a.resume {
+    let (mut log, mut wall) = if a.resume {
         read_log(&log_path, t.update)?
     } else {
         (vec![], 0.0)
@@ -315,14 +271,8 @@ pub fn run(a: TrainArgs) -> Result<()> {
         let dt = t0.elapsed().as_secs_f64();
         wall += dt;
         let sps = (t.agent_steps - steps_before) as f64 / dt.max(1e-9);
-        lines.push(log_line(&s, wall, sps));
-        let mut body = String::from(LOG_HEADER);
-        body.push('\n');
-        for l in &lines {
-            body += l;
-            body.push('\n');
-        }
-        write_atomic(&log_path, &body)?;
+        log.push(TrainLogRecord::new(&s, wall, sps));
+        write_atomic(&log_path, &records::to_text(&log)?)?;
         let msg = format!(
             "{} R {:.1} parts {:.1} coll {:.1} MU {:.2} lambda {:.2} | {:.0} agent-steps/s",
             s.setup, s.team_reward, s.parts_delivered, s.collisions, s.mu, s.lambda, sps
@@ -335,11 +285,11 @@ pub fn run(a: TrainArgs) -> Result<()> {
         done_here += 1;
         since_save += 1;
         if since_save >= t.cfg.save_every {
-            save_all(&t, &a.out, &lines)?;
+            save_all(&t, &a.out, &log)?;
             since_save = 0;
         }
     }
-    save_all(&t, &a.out, &lines)?;
+    save_all(&t, &a.out, &log)?;
     pb.finish_and_clear();
     let _ = std::io::stderr().flush();
     eprintln!(
@@ -394,13 +344,17 @@ mod tests {
         run(args(&v)?)
     }
 
-    /// log.csv rows without the timing columns (rollout_secs onwards).
-    fn log_rows(out: &Path) -> Vec<Vec<String>> {
-        let text = std::fs::read_to_string(out.join("log.csv")).unwrap();
-        let mut lines = text.lines();
-        assert_eq!(lines.next(), Some(LOG_HEADER));
-        lines
-            .map(|l| l.split(',').take(16).map(String::from).collect())
+    /// log.csv rows without the timing columns.
+    fn log_rows(out: &Path) -> Vec<TrainLogRecord> {
+        let (rows, _) = read_log(&out.join("log.csv"), u64::MAX).unwrap();
+        rows.into_iter()
+            .map(|r| TrainLogRecord {
+                rollout_secs: 0.0,
+                train_secs: 0.0,
+                wall_secs: 0.0,
+                agent_steps_per_sec: 0.0,
+                ..r
+            })
             .collect()
     }
 
@@ -470,8 +424,8 @@ mod tests {
         assert_eq!(rx.len(), 3);
         assert_eq!(rx, ry);
         for row in &rx {
-            assert_eq!(row[3], "0", "one stage");
-            assert!(r.contains(row[4].parse().unwrap()), "{}", row[4]);
+            assert_eq!(row.stage, 0, "one stage");
+            assert!(r.contains(row.setup.parse().unwrap()), "{}", row.setup);
         }
         let t = Trainer::resume(&y.join("trainer_state.safetensors"), None).unwrap();
         assert_eq!(t.schedule_string(), format!("{range}:8"));

@@ -18,22 +18,11 @@ pub(super) struct EvalRun {
 }
 
 pub(super) fn parse_eval(path: &Path, text: &str) -> Result<EvalRun> {
-    let csv = Csv::parse(path, text)?;
-    let pc = csv.col("policy")?;
-    let sc = csv.col("setup")?;
-    let cols = [
-        csv.col("parts_delivered")?,
-        csv.col("collisions")?,
-        csv.col("mu")?,
-    ];
     let mut model = None;
     let mut acc: BTreeMap<String, ([f64; 3], usize)> = BTreeMap::new();
-    for i in 0..csv.rows.len() {
-        let (line, f) = &csv.rows[i];
-        let m = f[pc]
-            .split_whitespace()
-            .next()
-            .map(str::to_ascii_lowercase)
+    for records::Line { line, record: r } in records::parse::<EvalResultRecord>(path, text)? {
+        let m = r
+            .model()
             .or_else(|| model_from_path(path))
             .ok_or_else(|| anyhow!("{}:{line}: empty `policy`", path.display()))?;
         match &model {
@@ -44,17 +33,26 @@ pub(super) fn parse_eval(path: &Path, text: &str) -> Result<EvalRun> {
             ),
             _ => {}
         }
-        if setup_key(&f[sc]).is_none() {
-            bail!("{}:{line}: setup `{}` is not N.M_K", path.display(), f[sc]);
+        if setup_key(&r.setup).is_none() {
+            bail!(
+                "{}:{line}: setup `{}` is not N.M_K",
+                path.display(),
+                r.setup
+            );
         }
-        let e = acc.entry(f[sc].clone()).or_insert(([0.0; 3], 0));
-        for (k, &c) in cols.iter().enumerate() {
-            e.0[k] += csv.num(i, c)?;
+        let values = [
+            finite(path, line, "parts_delivered", r.parts_delivered)?,
+            finite(path, line, "collisions", r.collisions)?,
+            finite(path, line, "mu", r.mu)?,
+        ];
+        let e = acc.entry(r.setup).or_insert(([0.0; 3], 0));
+        for (sum, v) in e.0.iter_mut().zip(values) {
+            *sum += v;
         }
         e.1 += 1;
     }
     Ok(EvalRun {
-        model: model.expect("Csv::parse guarantees a row"),
+        model: model.expect("records::parse guarantees a row"),
         setups: acc
             .into_iter()
             .map(|(s, (sum, n))| (s, sum.map(|x| x / n as f64)))
@@ -111,30 +109,21 @@ pub(super) fn parse_paper(
     text: &str,
     exp: &str,
 ) -> Result<BTreeMap<(String, String), f64>> {
-    let csv = Csv::parse(path, text)?;
-    let (ec, sc, mc, vc) = (
-        csv.col("experiment")?,
-        csv.col("setup")?,
-        csv.col("model")?,
-        csv.col("mu")?,
-    );
     let mut out = BTreeMap::new();
-    for i in 0..csv.rows.len() {
-        let f = &csv.rows[i].1;
-        if f[ec] != exp {
+    for records::Line { line, record: r } in records::parse::<PaperMuRecord>(path, text)? {
+        if r.experiment != exp {
             continue;
         }
-        let (n, m, k) = setup_key(&f[sc]).ok_or_else(|| {
+        let (n, m, k) = setup_key(&r.setup).ok_or_else(|| {
             anyhow!(
-                "{}:{}: setup `{}` is not N.M_K",
+                "{}:{line}: setup `{}` is not N.M_K",
                 path.display(),
-                csv.rows[i].0,
-                f[sc]
+                r.setup
             )
         })?;
         out.insert(
-            (format!("{n}.{m}_{k}"), f[mc].to_ascii_lowercase()),
-            csv.num(i, vc)?,
+            (format!("{n}.{m}_{k}"), r.model.to_ascii_lowercase()),
+            finite(path, line, "mu", r.mu)?,
         );
     }
     Ok(out)

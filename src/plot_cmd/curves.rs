@@ -21,12 +21,19 @@ impl Metric {
             o => bail!("unknown metric `{o}`: expected reward, parts, collisions or mu"),
         })
     }
-    pub(super) fn column(self) -> &'static str {
+    const ALL: [Metric; 4] = [
+        Metric::Reward,
+        Metric::Parts,
+        Metric::Collisions,
+        Metric::Mu,
+    ];
+    /// This metric's column of a log row.
+    fn of(self, r: &TrainLogRecord) -> (&'static str, f64) {
         match self {
-            Metric::Reward => "team_reward",
-            Metric::Parts => "parts_delivered",
-            Metric::Collisions => "collisions",
-            Metric::Mu => "mu",
+            Metric::Reward => ("team_reward", r.team_reward),
+            Metric::Parts => ("parts_delivered", r.parts_delivered),
+            Metric::Collisions => ("collisions", r.collisions),
+            Metric::Mu => ("mu", r.mu),
         }
     }
     pub(super) fn title(self) -> &'static str {
@@ -45,43 +52,37 @@ impl Metric {
 /// One training run's log.
 #[derive(Debug, Clone)]
 pub(super) struct LogRun {
-    pub(super) path: PathBuf,
     pub(super) model: String,
     pub(super) group: Option<String>,
     pub(super) episodes: Vec<f64>,
-    pub(super) setups: Option<Vec<String>>,
-    /// Per metric (Metric::index), the column if the log has it.
-    pub(super) values: [Option<Vec<f64>>; 4],
+    pub(super) setups: Vec<String>,
+    /// Per metric (Metric::index), its column.
+    pub(super) values: [Vec<f64>; 4],
 }
 
 pub(super) fn parse_log(path: &Path, text: &str) -> Result<LogRun> {
-    let csv = Csv::parse(path, text)?;
-    let ec = csv.col("episodes")?;
-    csv.col("team_reward")?;
-    let n = csv.rows.len();
-    let episodes = (0..n).map(|i| csv.num(i, ec)).collect::<Result<Vec<_>>>()?;
-    if let Some(i) = (1..n).find(|&i| episodes[i] <= episodes[i - 1]) {
+    let rows = records::parse::<TrainLogRecord>(path, text)?;
+    if let Some(w) = rows
+        .windows(2)
+        .find(|w| w[1].record.episodes <= w[0].record.episodes)
+    {
         bail!(
             "{}:{}: episodes {} do not increase (previous row {})",
             path.display(),
-            csv.rows[i].0,
-            episodes[i],
-            episodes[i - 1]
+            w[1].line,
+            w[1].record.episodes,
+            w[0].record.episodes
         );
     }
-    let setups = csv
-        .opt_col("setup")
-        .map(|c| csv.rows.iter().map(|(_, f)| f[c].clone()).collect());
-    let mut values: [Option<Vec<f64>>; 4] = Default::default();
-    for m in [
-        Metric::Reward,
-        Metric::Parts,
-        Metric::Collisions,
-        Metric::Mu,
-    ] {
-        if let Some(c) = csv.opt_col(m.column()) {
-            values[m.index()] = Some((0..n).map(|i| csv.num(i, c)).collect::<Result<_>>()?);
-        }
+    let mut values: [Vec<f64>; 4] = Default::default();
+    for m in Metric::ALL {
+        values[m.index()] = rows
+            .iter()
+            .map(|l| {
+                let (column, v) = m.of(&l.record);
+                finite(path, l.line, column, v)
+            })
+            .collect::<Result<_>>()?;
     }
     let model = model_from_path(path).unwrap_or_else(|| {
         path.parent()
@@ -91,11 +92,10 @@ pub(super) fn parse_log(path: &Path, text: &str) -> Result<LogRun> {
             .to_string()
     });
     Ok(LogRun {
-        path: path.to_path_buf(),
         model,
         group: group_from_path(path),
-        episodes,
-        setups,
+        episodes: rows.iter().map(|l| l.record.episodes as f64).collect(),
+        setups: rows.iter().map(|l| l.record.setup.clone()).collect(),
         values,
     })
 }
@@ -127,9 +127,7 @@ pub(super) fn parse_schedule(s: &str) -> Result<Vec<(f64, String)>> {
 /// Stage starts read from a log's setup column: a stage starts where the previous update
 /// ended (log rows carry the episode count at the end of their update).
 pub(super) fn stage_marks(run: &LogRun) -> Vec<(f64, String)> {
-    let Some(setups) = &run.setups else {
-        return vec![];
-    };
+    let setups = &run.setups;
     let mut out = vec![];
     for i in 0..setups.len() {
         if i == 0 {
@@ -246,17 +244,11 @@ pub(super) fn build_groups(
                         .map(|metric| {
                             let series: Vec<(Vec<f64>, Vec<f64>)> = mine
                                 .iter()
-                                .filter_map(|r| {
-                                    let ys = r.values[metric.index()].as_ref()?;
-                                    let own = stage_marks(r);
-                                    let st = stage_ids(
-                                        &r.episodes,
-                                        if own.is_empty() { &marks } else { &own },
-                                    );
-                                    Some((
-                                        r.episodes.clone(),
-                                        smooth_within_stages(ys, &st, smooth),
-                                    ))
+                                .map(|r| {
+                                    let ys = &r.values[metric.index()];
+                                    // a log's own stages (its setup column) smooth it
+                                    let st = stage_ids(&r.episodes, &stage_marks(r));
+                                    (r.episodes.clone(), smooth_within_stages(ys, &st, smooth))
                                 })
                                 .collect();
                             aggregate_curves(&series)
@@ -292,25 +284,6 @@ pub(super) fn run_curves(a: &CurvesArgs) -> Result<()> {
             std::fs::read_to_string(f).with_context(|| format!("{}: cannot read", f.display()))?;
         runs.push(parse_log(f, &text)?);
     }
-    // A panel only for metrics every log has.
-    let metrics: Vec<Metric> = metrics
-        .into_iter()
-        .filter(|m| {
-            let missing: Vec<String> = runs
-                .iter()
-                .filter(|r| r.values[m.index()].is_none())
-                .map(|r| r.path.display().to_string())
-                .collect();
-            if !missing.is_empty() {
-                eprintln!(
-                    "note: no `{}` column in {}: panel left out",
-                    m.column(),
-                    missing.join(", ")
-                );
-            }
-            missing.is_empty()
-        })
-        .collect();
     let longest = runs.iter().map(|r| r.episodes.len()).max().unwrap_or(1);
     let smooth = if a.smooth > 0 {
         a.smooth
