@@ -1,4 +1,10 @@
-//! Commands typed on stdin while a fleet runs (docs/bench/live.md).
+//! Commands typed on stdin while a fleet runs (docs/bench/live.md): parsed, then applied
+//! to the running [`Fleet`].
+
+use std::io::Write;
+
+use super::children::{restarts_summary, signal, wait_or_kill, STOP_GRACE};
+use super::{Fleet, BRIDGE};
 
 /// A command typed while the fleet runs (see the module docs).
 #[derive(Debug, PartialEq)]
@@ -63,6 +69,125 @@ pub fn parse_live(line: &str) -> Result<LiveCmd, String> {
         _ => Err(format!(
             "unknown command `{line}` (add robot [NAME] | kill NAME | stop NAME | add machine [X Y] | remove machine ID | add storage [X Y] | remove storage ID | status)"
         )),
+    }
+}
+
+/// The commands applied to the running fleet.
+impl Fleet {
+    pub(super) fn on_command(&mut self, line: &str) {
+        if line.is_empty() {
+            return;
+        }
+        let at = self.at();
+        match parse_live(line) {
+            Err(e) => println!("fleet: t={at:.1}s error: {e}"),
+            Ok(LiveCmd::AddRobot(name)) => self.add_robot(name),
+            Ok(LiveCmd::Kill(name)) => self.remove_robot(&name, libc::SIGKILL),
+            Ok(LiveCmd::Stop(name)) => self.remove_robot(&name, libc::SIGINT),
+            Ok(LiveCmd::Bridge(l)) => {
+                match writeln!(self.bridge.stdin, "{l}").and_then(|_| self.bridge.stdin.flush()) {
+                    Ok(()) => println!("fleet: t={at:.1}s sent `{l}` to {BRIDGE}"),
+                    Err(e) => println!("fleet: t={at:.1}s error: {BRIDGE} stdin: {e}"),
+                }
+            }
+            Ok(LiveCmd::Status) => {
+                let procs: Vec<String> = self
+                    .robots
+                    .iter()
+                    .map(|p| format!("{}({})", p.label, p.child.id()))
+                    .chain([format!("{BRIDGE}({})", self.bridge.child.id())])
+                    .collect();
+                println!(
+                    "fleet: t={at:.1}s status: {} robots in {} processes: {}; health: {}; watchdog restarts: {}",
+                    self.robots.iter().map(|p| p.robots.len()).sum::<usize>(),
+                    procs.len(),
+                    procs.join(" "),
+                    self.health.status(),
+                    restarts_summary(&self.restarts)
+                );
+                if let Some(v) = &self.last {
+                    println!("fleet: last metrics {v}");
+                }
+            }
+        }
+    }
+
+    fn hosts(&self, name: &str) -> bool {
+        self.robots
+            .iter()
+            .any(|p| p.robots.iter().any(|r| r == name))
+    }
+
+    fn add_robot(&mut self, name: Option<String>) {
+        let at = self.at();
+        let name = name.unwrap_or_else(|| loop {
+            let n = format!("robot_{}", self.next_robot);
+            self.next_robot += 1;
+            if !self.hosts(&n) {
+                break n;
+            }
+        });
+        if self.hosts(&name) || name == BRIDGE {
+            println!("fleet: t={at:.1}s error: {name} is already running");
+            return;
+        }
+        match self.plan.spawn_robots(std::slice::from_ref(&name), false) {
+            Ok(p) => {
+                println!("fleet: t={at:.1}s started {name} (pid {})", p.child.id());
+                self.robots.push(p);
+            }
+            Err(e) => println!("fleet: t={at:.1}s error: {e:#}"),
+        }
+    }
+
+    /// Signal the process hosting `name`; a group process is restarted without it.
+    fn remove_robot(&mut self, name: &str, sig: i32) {
+        let at = self.at();
+        let what = if sig == libc::SIGKILL {
+            "SIGKILL"
+        } else {
+            "SIGINT"
+        };
+        if name == BRIDGE {
+            println!("fleet: t={at:.1}s error: the bridge is not a robot");
+            return;
+        }
+        let Some(i) = self
+            .robots
+            .iter()
+            .position(|p| p.robots.iter().any(|r| r == name))
+        else {
+            println!("fleet: t={at:.1}s error: no running robot `{name}`");
+            return;
+        };
+        let mut p = self.robots.remove(i);
+        signal(p.child.id(), sig);
+        let st = if sig == libc::SIGKILL {
+            p.child.wait().ok()
+        } else {
+            wait_or_kill(&mut p.child, STOP_GRACE)
+        };
+        println!(
+            "fleet: t={at:.1}s {what} {} (pid {}): {}",
+            p.label,
+            p.child.id(),
+            st.map(|s| s.to_string()).unwrap_or("killed".into())
+        );
+        let rest: Vec<String> = p.robots.into_iter().filter(|r| r != name).collect();
+        if rest.is_empty() {
+            return;
+        }
+        match self.plan.spawn_robots(&rest, true) {
+            Ok(q) => {
+                println!(
+                    "fleet: t={at:.1}s restarted {} without {name} (pid {})",
+                    q.label,
+                    q.child.id()
+                );
+                self.robots.push(q);
+            }
+            Err(e) => self.failure = Some(format!("restarting {} failed: {e:#}", rest.join(","))),
+        }
     }
 }
 

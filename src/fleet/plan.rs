@@ -1,0 +1,263 @@
+//! What a fleet run starts and how: the resolved arguments, the scenario, the binaries,
+//! and the command lines of `robot_node` and `sim_bridge` children.
+
+use std::io::{BufRead, BufReader};
+use std::os::unix::process::CommandExt;
+use std::path::{Path, PathBuf};
+use std::process::{Command, Stdio};
+use std::sync::mpsc::Sender;
+use std::time::Instant;
+
+use anyhow::{anyhow, bail, Context, Result};
+
+use super::children::{BridgeProc, RobotProc};
+use super::{layout, FleetArgs, BRIDGE};
+
+fn sibling(name: &str) -> Result<PathBuf> {
+    let exe = std::env::current_exe().context("locating the tending executable")?;
+    let p = exe
+        .parent()
+        .ok_or_else(|| anyhow!("executable has no directory"))?
+        .join(name);
+    if !p.exists() {
+        bail!(
+            "{} not found next to {} (build it: cargo build --release -p {})",
+            p.display(),
+            exe.display(),
+            if name == BRIDGE {
+                "sim-bridge"
+            } else {
+                "robot-node"
+            }
+        );
+    }
+    Ok(p)
+}
+
+/// The checkpoint shipped in the repository (the README's main job runs it).
+pub(super) fn bundled_policy() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("policy/pretrained/smappo_6.4_2.safetensors")
+}
+
+/// `--policy` as given: `greedy` means no checkpoint; none means the bundled policy when it
+/// is present (a checkout without it falls back to greedy, and says so).
+fn resolve_policy(p: Option<PathBuf>) -> Option<PathBuf> {
+    match p {
+        Some(p) if p.as_os_str() == "greedy" => None,
+        Some(p) => Some(p),
+        None => {
+            let b = bundled_policy();
+            if b.exists() {
+                Some(b)
+            } else {
+                eprintln!("fleet: no bundled policy at {}, using greedy", b.display());
+                None
+            }
+        }
+    }
+}
+
+/// Everything fixed for the run: what to start and how.
+pub(super) struct Plan {
+    pub(super) a: FleetArgs,
+    pub(super) setup: sim::Setup,
+    pub(super) cfg: sim::ScenarioConfig,
+    pub(super) sizes: sim::Sizes,
+    pub(super) domain: u16,
+    pub(super) lockstep: bool,
+    pub(super) log_dir: PathBuf,
+    pub(super) node_bin: PathBuf,
+    pub(super) bridge_bin: PathBuf,
+    pub(super) per_process: usize,
+}
+
+impl Plan {
+    pub(super) fn new(mut a: FleetArgs) -> Result<Plan> {
+        // greedy-orca is a robot_node controller (obs::orca), not a checkpoint.
+        if a.policy.as_deref() == Some(Path::new("greedy-orca")) {
+            a.policy = Some("greedy".into());
+            a.robot_params.push("controller:=greedy-orca".into());
+        }
+        a.policy = resolve_policy(a.policy.take());
+        let setup: sim::Setup = a.setup.parse().map_err(|e| anyhow!("--setup: {e}"))?;
+        if !(a.duration.is_finite() && a.duration > 0.0) {
+            bail!("--duration must be > 0");
+        }
+        if a.robots_per_process == Some(0) {
+            bail!("--robots-per-process must be at least 1");
+        }
+        let bridge_bin = sibling(BRIDGE)?;
+        let node_bin = sibling("robot_node")?;
+        if let Some(p) = &a.policy {
+            // fail early with one clear error rather than N identical child errors
+            if !p.is_file() {
+                bail!("policy checkpoint {} does not exist", p.display());
+            }
+        }
+        let cfg = match &a.config {
+            Some(p) => sim::ScenarioConfig::load(p).map_err(|e| anyhow!("{}: {e}", p.display()))?,
+            None => sim::ScenarioConfig::default(),
+        };
+        let sizes = *sim::Env::new(cfg.clone(), setup, a.seed)?.sizes();
+        let domain = a.domain.unwrap_or_else(|| {
+            std::env::var("ROS_DOMAIN_ID")
+                .ok()
+                .and_then(|d| d.trim().parse().ok())
+                .unwrap_or(0)
+        });
+        // the ROS 2 limit (RTPS port arithmetic): refused here once, not by every child
+        if domain > 232 {
+            bail!("ROS domain id {domain} (--domain or ROS_DOMAIN_ID) is above 232");
+        }
+        let log_dir = a.log_dir.clone().unwrap_or_else(|| {
+            std::env::temp_dir().join(format!("tending-fleet-{}", std::process::id()))
+        });
+        std::fs::create_dir_all(&log_dir)
+            .with_context(|| format!("creating log directory {}", log_dir.display()))?;
+        let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
+        let per_process = layout::robots_per_process(setup.robots, cores, a.robots_per_process);
+        Ok(Plan {
+            lockstep: a.mode == "lockstep",
+            a,
+            setup,
+            cfg,
+            sizes,
+            domain,
+            log_dir,
+            node_bin,
+            bridge_bin,
+            per_process,
+        })
+    }
+
+    /// What the robots run, for the start-up line: the checkpoint, or the scripted
+    /// controller (a `controller:=` robot parameter wins, as it does in robot_node).
+    pub(super) fn controller(&self) -> String {
+        let forced = self
+            .a
+            .robot_params
+            .iter()
+            .rev()
+            .find_map(|p| p.strip_prefix("controller:="));
+        match (&self.a.policy, forced) {
+            (_, Some(c)) if c != "policy" => c.to_string(),
+            (Some(p), _) => p.display().to_string(),
+            (None, _) => "greedy".into(),
+        }
+    }
+
+    /// The ROS 2 environment of a child: the fleet's domain, and the distribution a
+    /// sourced ROS 2 install would set (ros2-client warns in every process without it).
+    fn ros_env(&self, c: &mut Command) {
+        c.env("ROS_DOMAIN_ID", self.domain.to_string());
+        if std::env::var_os("ROS_DISTRO").is_none() {
+            c.env("ROS_DISTRO", "jazzy");
+        }
+    }
+
+    /// A child's log file; a restarted child appends (its watchdog's message stays).
+    fn log(&self, label: &str, append: bool) -> Result<std::fs::File> {
+        let p = self.log_dir.join(format!("{label}.log"));
+        let mut o = std::fs::OpenOptions::new();
+        if append {
+            o.create(true).append(true);
+        } else {
+            o.create(true).write(true).truncate(true);
+        }
+        o.open(&p)
+            .with_context(|| format!("opening {}", p.display()))
+    }
+
+    pub(super) fn spawn_robots(&self, robots: &[String], restart: bool) -> Result<RobotProc> {
+        let f = |x: f32| format!("{:?}", x as f64);
+        let label = layout::label(robots);
+        let mut c = Command::new(&self.node_bin);
+        self.ros_env(&mut c);
+        match robots {
+            [one] => c.args(["--ros-args", "-r", &format!("__ns:=/{one}")]),
+            many => c.args(["--ros-args", "-p", &format!("robots:={}", many.join(","))]),
+        };
+        let s = &self.sizes;
+        c.args(["-p", &format!("control_rate_hz:={}", self.a.rate_hz)])
+            .args(["-p", &format!("k_speed:={}", f(self.cfg.task.k_speed))])
+            .args(["-p", &format!("robot_radius:={}", f(s.robot_radius))])
+            .args(["-p", &format!("machine_half_x:={}", f(s.machine_half[0]))])
+            .args(["-p", &format!("machine_half_y:={}", f(s.machine_half[1]))])
+            .args(["-p", &format!("storage_half_x:={}", f(s.storage_half[0]))])
+            .args(["-p", &format!("storage_half_y:={}", f(s.storage_half[1]))])
+            .args([
+                "-p",
+                &format!("stale_timeout_s:={:?}", self.a.stale_timeout),
+            ])
+            .stdin(Stdio::null())
+            .stdout(Stdio::null())
+            .stderr(self.log(&label, restart)?)
+            .process_group(0); // Ctrl-C reaches us only; we stop the children in order
+        if self.lockstep {
+            c.args(["-p", "lockstep:=true"]);
+        }
+        if let Some(p) = &self.a.policy {
+            c.args(["-p", &format!("policy:={}", p.display())]);
+        }
+        for rp in &self.a.robot_params {
+            c.args(["-p", rp]);
+        }
+        let child = c
+            .spawn()
+            .with_context(|| format!("starting {}", self.node_bin.display()))?;
+        Ok(RobotProc {
+            robots: robots.to_vec(),
+            label,
+            child,
+            started: Instant::now(),
+        })
+    }
+
+    /// Start the bridge; its stdout (metrics lines) goes to `metrics`.
+    pub(super) fn spawn_bridge(
+        &self,
+        restart: bool,
+        metrics: Sender<String>,
+    ) -> Result<BridgeProc> {
+        let a = &self.a;
+        let mut b = Command::new(&self.bridge_bin);
+        self.ros_env(&mut b);
+        b.args(["--ros-args", "-p", &format!("setup:={}", self.setup)])
+            .args(["-p", &format!("seed:={}", a.seed)])
+            .args(["-p", &format!("mode:={}", a.mode)])
+            .args(["-p", &format!("rate_hz:={}", a.rate_hz)])
+            .args(["-p", &format!("stale_timeout_s:={:?}", a.stale_timeout)])
+            .args(["-p", "stdin_commands:=true"])
+            .stdin(Stdio::piped())
+            .stdout(Stdio::piped())
+            .stderr(self.log(BRIDGE, restart)?)
+            .process_group(0);
+        if let Some(c) = &a.config {
+            b.args(["-p", &format!("config:={}", c.display())]);
+        }
+        if let Some(r) = &a.record {
+            b.args(["-p", &format!("record:={}", r.display())]);
+        }
+        if self.lockstep {
+            let steps = (a.duration * a.rate_hz).round().max(1.0) as u64;
+            b.args(["-p", &format!("max_steps:={steps}")]);
+        }
+        let mut child = b
+            .spawn()
+            .with_context(|| format!("starting {}", self.bridge_bin.display()))?;
+        let out = child.stdout.take().expect("piped");
+        let stdin = child.stdin.take().expect("piped");
+        std::thread::spawn(move || {
+            for line in BufReader::new(out).lines().map_while(Result::ok) {
+                if metrics.send(line).is_err() {
+                    break;
+                }
+            }
+        });
+        Ok(BridgeProc {
+            child,
+            stdin,
+            started: Instant::now(),
+        })
+    }
+}
