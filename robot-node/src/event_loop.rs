@@ -1,9 +1,8 @@
-//! The node's event loop (docs/adr/0007-mio-event-loop.md): the hosted robots with their
-//! `cmd_vel` writers, one reader per input topic shared by all of them
-//! (docs/adr/0008-shared-readers.md), and one method per phase: wait, drain, discover,
-//! lockstep, tick (sim time or wall clock), stats, shutdown.
+//! The node's event loop (docs/adr/0007-mio-event-loop.md) over the hosted robots with
+//! their `cmd_vel` writers ([`crate::hosted`]) and one reader per input topic shared by
+//! all of them ([`crate::readers`], docs/adr/0008-shared-readers.md): one method per
+//! phase: wait, drain, discover, lockstep, tick (sim time or wall clock), stats, shutdown.
 
-use std::collections::HashSet;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
@@ -15,55 +14,18 @@ use ros2_client::rosout;
 use tracing::{debug, info, warn};
 
 use msgs::topics::{self, Leaf};
-use msgs::{Bool, Clock, EntityTopic, PoseStamped, Profile, Twist};
-use ros::{stamp_key_info, subscription, StampedWriter};
+use msgs::{Bool, Clock, EntityTopic, PoseStamped, Profile};
+use ros::subscription;
 
 use crate::args::Params;
-use crate::fanout::{self, Incoming};
+use crate::fanout;
+use crate::hosted::{host, lockstep_step, print_stats_json, tick_now, Hosted};
 use crate::node::{retry, RobotSpec};
-use crate::tick::{Brain, Outcome, TickResult};
+use crate::readers::{drain, Readers, Sub, SubKind};
 use crate::watchdog::{Stage, Watchdog};
-use crate::world::{Counters, DropReason, World, WorldConfig, WriterId};
-
-enum SubKind {
-    Pose(Subscription<PoseStamped>),
-    Flag(Subscription<Bool>),
-}
-
-struct Sub {
-    topic: EntityTopic,
-    kind: SubKind,
-}
+use crate::world::{Counters, DropReason};
 
 const CLOCK_TOKEN: Token = Token(usize::MAX - 1);
-
-/// One hosted robot: its brain (world model, controller, counters), its `cmd_vel` writer
-/// and its timing state.
-struct Hosted {
-    me: String,
-    /// Prefix of its log lines: empty with one robot per process, `robot_3: ` otherwise.
-    tag: String,
-    brain: Brain,
-    cmd: StampedWriter<Twist>,
-    /// Wall clock: when its next tick is due.
-    next_tick: Instant,
-    last_outcome: Option<Outcome>,
-    /// Lockstep: the last state acted on, and the state waited for (since when).
-    last_acted: Option<i64>,
-    pending: Option<(i64, Instant)>,
-}
-
-impl Hosted {
-    fn publish(&mut self, v: [f64; 2], stamp: Option<i64>) {
-        if self
-            .cmd
-            .write(Twist::planar(v[0], v[1]), stamp.map(|us| us * 1000))
-            .is_err()
-        {
-            self.brain.counters.publish_errors += 1;
-        }
-    }
-}
 
 /// Readers are drained when their mio event fires, when a drain stopped at its bound, and
 /// all of them at this period (a safety net: a missed wake-up costs at most this long).
@@ -96,22 +58,6 @@ pub(crate) fn run(
         l.stats();
     }
     Ok(l.shutdown())
-}
-
-/// The readers of the node: one per input topic, whatever the number of hosted robots,
-/// indexed by their mio token.
-#[derive(Default)]
-struct Readers {
-    subs: Vec<Sub>,
-    /// Topics subscribed to (or being subscribed to).
-    known: HashSet<EntityTopic>,
-    /// Topics already warned about (wrong type, failed subscription): warned once.
-    wrong_type_warned: HashSet<String>,
-    sub_failed_warned: HashSet<EntityTopic>,
-    /// Readers to drain: signalled by mio, or left with samples by a bounded drain.
-    todo: Vec<usize>,
-    leftover: Vec<usize>,
-    drops_seen: u64,
 }
 
 /// The event loop's state: the hosted robots, the readers and the deadlines of each phase.
@@ -518,203 +464,4 @@ impl<'a> EventLoop<'a> {
         }
         total
     }
-}
-
-/// The hosted robots: each with its brain and its cmd_vel writer. cmd_vel carries the
-/// stamp of the state it answers as its DDS source timestamp (lockstep); otherwise the
-/// wall clock, like any ROS 2 publisher.
-fn host(
-    p: &Params,
-    stop: &AtomicBool,
-    ctx: &Context,
-    node: &Node,
-    robots: Vec<RobotSpec>,
-    multi: bool,
-    wd: &Watchdog,
-) -> anyhow::Result<Vec<Hosted>> {
-    let wcfg = WorldConfig {
-        stale_timeout_s: p.stale_timeout_s,
-        static_stale_timeout_s: p.static_stale_timeout_s,
-        room: msgs::RoomBounds {
-            half_extent: msgs::validate::ROOM_HALF_EXTENT,
-            margin: p.room_margin,
-        },
-    };
-    let mut hosted: Vec<Hosted> = Vec::with_capacity(robots.len());
-    let placeholder = Instant::now(); // set when the loop starts
-    for (me, controller, k_speed) in robots {
-        let cmd_name = topics::robot(&me, Leaf::CmdVel).ros_name();
-        let cmd: StampedWriter<Twist> = retry("cmd_vel writer", stop, wd, || {
-            StampedWriter::new(ctx, node, &cmd_name, Profile::RobotStream).context("cmd_vel writer")
-        })?;
-        hosted.push(Hosted {
-            tag: if multi {
-                format!("{me}: ")
-            } else {
-                String::new()
-            },
-            brain: Brain::new(World::new(&me, wcfg), controller, k_speed),
-            me,
-            cmd,
-            next_tick: placeholder,
-            last_outcome: None,
-            last_acted: None,
-            pending: None,
-        });
-    }
-    Ok(hosted)
-}
-
-/// Log a change of what a robot's ticks decide (not every tick).
-fn log_outcome(h: &mut Hosted, log: &NodeLoggingHandle, r: &TickResult, what: &str) {
-    if h.last_outcome
-        .as_ref()
-        .is_none_or(|l| !l.same_kind(&r.outcome))
-    {
-        match &r.outcome {
-            Outcome::Command => rosout!(
-                *log,
-                LogLevel::Info,
-                "{}{what}: observation counts {:?}",
-                h.tag,
-                r.counts
-            ),
-            other => rosout!(
-                *log,
-                LogLevel::Warn,
-                "{}commanding zero velocity: {other:?}",
-                h.tag
-            ),
-        }
-    }
-    h.last_outcome = Some(r.outcome.clone());
-}
-
-/// Wall clock or sim time: one control step of `h` now, and its command.
-fn tick_now(h: &mut Hosted, log: &NodeLoggingHandle, now: f64) {
-    let r = h.brain.tick(now);
-    // A command computed from state carries the stamp of the robot's own pose it used (as
-    // in lockstep), so the bridge can tell robots that receive its state from robots that
-    // only send zeros (`robots_on_state`, the fleet's health check); none otherwise.
-    let stamp = match r.outcome {
-        Outcome::Command => h.brain.world.own_pose_stamp(),
-        _ => None,
-    };
-    h.publish(r.velocity, stamp);
-    log_outcome(h, log, &r, "controlling");
-}
-
-/// Lockstep: act once `h`'s own data and every expected entity of the newest state are in
-/// (or after `wait`).
-fn lockstep_step(h: &mut Hosted, log: &NodeLoggingHandle, wait: Duration, now: f64) {
-    let Some(s) = h.brain.world.own_pose_stamp() else {
-        return;
-    };
-    if h.last_acted.is_some_and(|l| s < l) {
-        info!("{}sim time went back: resetting controller", h.tag);
-        h.brain.reset();
-        h.last_acted = None;
-        h.pending = None;
-    }
-    if h.last_acted.is_some_and(|l| s <= l) {
-        return;
-    }
-    let since = match h.pending {
-        Some((ps, since)) if ps == s => since,
-        _ => {
-            let now = Instant::now();
-            h.pending = Some((s, now));
-            now
-        }
-    };
-    let missing = h.brain.world.lockstep_missing(s, h.last_acted, now);
-    let timed_out = since.elapsed() >= wait;
-    if missing == Some(0) || timed_out {
-        if missing != Some(0) {
-            h.brain.counters.lockstep_wait_timeouts += 1;
-            debug!(
-                "{}lockstep: acting on {s} us with {missing:?} entities missing",
-                h.tag
-            );
-        }
-        let r = h.brain.tick_lockstep(s);
-        h.publish(r.velocity, Some(s));
-        h.last_acted = Some(s);
-        h.pending = None;
-        log_outcome(h, log, &r, "controlling (lockstep)");
-    }
-}
-
-/// One machine-readable stats line on stdout (`-p stats_json:=true`).
-fn print_stats_json(me: &str, c: &Counters, t0: Instant, last: bool) {
-    use std::io::Write;
-    let mut v = c.to_json();
-    v["robot"] = me.into();
-    v["uptime_s"] = t0.elapsed().as_secs_f64().into();
-    v["final"] = last.into();
-    let mut out = std::io::stdout().lock();
-    let _ = writeln!(out, "{v}");
-    let _ = out.flush();
-}
-
-/// Take every sample waiting on `sub` (at most 1000: a flood on one topic cannot starve
-/// the loop) and fan each out to every hosted robot. Returns true if the bound was hit
-/// (more may be waiting).
-fn drain(sub: &Sub, hosted: &mut [Hosted], now: f64, drops_seen: &mut u64) -> bool {
-    for _ in 0..1000 {
-        let brains = hosted.iter_mut().map(|h| &mut h.brain);
-        let d = match &sub.kind {
-            SubKind::Pose(s) => match s.take() {
-                Ok(Some((m, info))) => fanout::deliver(
-                    brains,
-                    &sub.topic,
-                    &Incoming::Pose {
-                        msg: &m,
-                        writer: writer_id(&info),
-                    },
-                    now,
-                ),
-                Ok(None) => return false,
-                Err(e) => {
-                    debug!("undecodable sample on {}: {e:?}", sub.topic.ros_name());
-                    fanout::deliver(brains, &sub.topic, &Incoming::Undecodable, now)
-                }
-            },
-            SubKind::Flag(s) => match s.take() {
-                Ok(Some((m, info))) => fanout::deliver(
-                    brains,
-                    &sub.topic,
-                    &Incoming::Flag {
-                        value: m.data,
-                        stamp: stamp_key_info(&info),
-                        writer: writer_id(&info),
-                    },
-                    now,
-                ),
-                Ok(None) => return false,
-                Err(e) => {
-                    debug!("undecodable sample on {}: {e:?}", sub.topic.ros_name());
-                    fanout::deliver(brains, &sub.topic, &Incoming::Undecodable, now)
-                }
-            },
-        };
-        if d.new_writer > 0 {
-            warn!(
-                "{}: the pinned writer's data went stale; now pinned to a new writer",
-                sub.topic.ros_name()
-            );
-        }
-        if let Some(r) = d.reason {
-            if *drops_seen < 20 || drops_seen.is_power_of_two() {
-                warn!("dropped a sample on {}: {r:?}", sub.topic.ros_name());
-            }
-            *drops_seen += 1;
-        }
-    }
-    true
-}
-
-/// The DDS writer a received sample came from (its GUID).
-fn writer_id(info: &ros2_client::message_info::MessageInfo) -> WriterId {
-    info.publisher_gid().to_bytes16()
 }

@@ -8,14 +8,18 @@
 //! - [`tick`]: one control step, DDS-free;
 //! - [`fanout`]: one received sample to every robot a process hosts, DDS-free;
 //! - [`node`]: the ros2-client node: controllers, context, node and spinner, start-up;
-//! - `event_loop`: discovery, one reader per topic, timing, cmd_vel (one method per phase);
+//! - `event_loop`: discovery, timing, the phases of the loop (one method each);
+//! - `hosted`: a hosted robot, its cmd_vel writer and one control step of it;
+//! - `readers`: one reader per input topic, drained into every hosted robot;
 //! - [`watchdog`]: exit code 75 when start-up or the control loop hangs (the stages it names).
 
 pub mod args;
 pub mod controller;
 mod event_loop;
 pub mod fanout;
+mod hosted;
 pub mod node;
+mod readers;
 pub mod tick;
 pub mod watchdog;
 pub mod world;

@@ -1,0 +1,187 @@
+//! A robot hosted by the node: its brain (world model, controller, counters), its
+//! `cmd_vel` writer and its timing state, and what one control step of it does (wall
+//! clock or sim time: [`tick_now`]; lockstep: [`lockstep_step`]).
+
+use std::sync::atomic::AtomicBool;
+use std::time::{Duration, Instant};
+
+use anyhow::Context as _;
+use ros2_client::dds::{Context, Node, NodeLoggingHandle};
+use ros2_client::log::LogLevel;
+use ros2_client::rosout;
+use tracing::{debug, info};
+
+use msgs::topics::{self, Leaf};
+use msgs::{Profile, Twist};
+use ros::StampedWriter;
+
+use crate::args::Params;
+use crate::node::{retry, RobotSpec};
+use crate::tick::{Brain, Outcome, TickResult};
+use crate::watchdog::Watchdog;
+use crate::world::{Counters, World, WorldConfig};
+
+/// One hosted robot: its brain (world model, controller, counters), its `cmd_vel` writer
+/// and its timing state.
+pub(crate) struct Hosted {
+    pub(crate) me: String,
+    /// Prefix of its log lines: empty with one robot per process, `robot_3: ` otherwise.
+    pub(crate) tag: String,
+    pub(crate) brain: Brain,
+    pub(crate) cmd: StampedWriter<Twist>,
+    /// Wall clock: when its next tick is due.
+    pub(crate) next_tick: Instant,
+    pub(crate) last_outcome: Option<Outcome>,
+    /// Lockstep: the last state acted on, and the state waited for (since when).
+    pub(crate) last_acted: Option<i64>,
+    pub(crate) pending: Option<(i64, Instant)>,
+}
+
+impl Hosted {
+    pub(crate) fn publish(&mut self, v: [f64; 2], stamp: Option<i64>) {
+        if self
+            .cmd
+            .write(Twist::planar(v[0], v[1]), stamp.map(|us| us * 1000))
+            .is_err()
+        {
+            self.brain.counters.publish_errors += 1;
+        }
+    }
+}
+
+/// The hosted robots: each with its brain and its cmd_vel writer. cmd_vel carries the
+/// stamp of the state it answers as its DDS source timestamp (lockstep); otherwise the
+/// wall clock, like any ROS 2 publisher.
+pub(crate) fn host(
+    p: &Params,
+    stop: &AtomicBool,
+    ctx: &Context,
+    node: &Node,
+    robots: Vec<RobotSpec>,
+    multi: bool,
+    wd: &Watchdog,
+) -> anyhow::Result<Vec<Hosted>> {
+    let wcfg = WorldConfig {
+        stale_timeout_s: p.stale_timeout_s,
+        static_stale_timeout_s: p.static_stale_timeout_s,
+        room: msgs::RoomBounds {
+            half_extent: msgs::validate::ROOM_HALF_EXTENT,
+            margin: p.room_margin,
+        },
+    };
+    let mut hosted: Vec<Hosted> = Vec::with_capacity(robots.len());
+    let placeholder = Instant::now(); // set when the loop starts
+    for (me, controller, k_speed) in robots {
+        let cmd_name = topics::robot(&me, Leaf::CmdVel).ros_name();
+        let cmd: StampedWriter<Twist> = retry("cmd_vel writer", stop, wd, || {
+            StampedWriter::new(ctx, node, &cmd_name, Profile::RobotStream).context("cmd_vel writer")
+        })?;
+        hosted.push(Hosted {
+            tag: if multi {
+                format!("{me}: ")
+            } else {
+                String::new()
+            },
+            brain: Brain::new(World::new(&me, wcfg), controller, k_speed),
+            me,
+            cmd,
+            next_tick: placeholder,
+            last_outcome: None,
+            last_acted: None,
+            pending: None,
+        });
+    }
+    Ok(hosted)
+}
+
+/// Log a change of what a robot's ticks decide (not every tick).
+fn log_outcome(h: &mut Hosted, log: &NodeLoggingHandle, r: &TickResult, what: &str) {
+    if h.last_outcome
+        .as_ref()
+        .is_none_or(|l| !l.same_kind(&r.outcome))
+    {
+        match &r.outcome {
+            Outcome::Command => rosout!(
+                *log,
+                LogLevel::Info,
+                "{}{what}: observation counts {:?}",
+                h.tag,
+                r.counts
+            ),
+            other => rosout!(
+                *log,
+                LogLevel::Warn,
+                "{}commanding zero velocity: {other:?}",
+                h.tag
+            ),
+        }
+    }
+    h.last_outcome = Some(r.outcome.clone());
+}
+
+/// Wall clock or sim time: one control step of `h` now, and its command.
+pub(crate) fn tick_now(h: &mut Hosted, log: &NodeLoggingHandle, now: f64) {
+    let r = h.brain.tick(now);
+    // A command computed from state carries the stamp of the robot's own pose it used (as
+    // in lockstep), so the bridge can tell robots that receive its state from robots that
+    // only send zeros (`robots_on_state`, the fleet's health check); none otherwise.
+    let stamp = match r.outcome {
+        Outcome::Command => h.brain.world.own_pose_stamp(),
+        _ => None,
+    };
+    h.publish(r.velocity, stamp);
+    log_outcome(h, log, &r, "controlling");
+}
+
+/// Lockstep: act once `h`'s own data and every expected entity of the newest state are in
+/// (or after `wait`).
+pub(crate) fn lockstep_step(h: &mut Hosted, log: &NodeLoggingHandle, wait: Duration, now: f64) {
+    let Some(s) = h.brain.world.own_pose_stamp() else {
+        return;
+    };
+    if h.last_acted.is_some_and(|l| s < l) {
+        info!("{}sim time went back: resetting controller", h.tag);
+        h.brain.reset();
+        h.last_acted = None;
+        h.pending = None;
+    }
+    if h.last_acted.is_some_and(|l| s <= l) {
+        return;
+    }
+    let since = match h.pending {
+        Some((ps, since)) if ps == s => since,
+        _ => {
+            let now = Instant::now();
+            h.pending = Some((s, now));
+            now
+        }
+    };
+    let missing = h.brain.world.lockstep_missing(s, h.last_acted, now);
+    let timed_out = since.elapsed() >= wait;
+    if missing == Some(0) || timed_out {
+        if missing != Some(0) {
+            h.brain.counters.lockstep_wait_timeouts += 1;
+            debug!(
+                "{}lockstep: acting on {s} us with {missing:?} entities missing",
+                h.tag
+            );
+        }
+        let r = h.brain.tick_lockstep(s);
+        h.publish(r.velocity, Some(s));
+        h.last_acted = Some(s);
+        h.pending = None;
+        log_outcome(h, log, &r, "controlling (lockstep)");
+    }
+}
+
+/// One machine-readable stats line on stdout (`-p stats_json:=true`).
+pub(crate) fn print_stats_json(me: &str, c: &Counters, t0: Instant, last: bool) {
+    use std::io::Write;
+    let mut v = c.to_json();
+    v["robot"] = me.into();
+    v["uptime_s"] = t0.elapsed().as_secs_f64().into();
+    v["final"] = last.into();
+    let mut out = std::io::stdout().lock();
+    let _ = writeln!(out, "{v}");
+    let _ = out.flush();
+}
