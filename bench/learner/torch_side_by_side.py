@@ -196,7 +196,7 @@ def ours_steps(binary, n_steps):
 def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--binary", default="target/release/examples/ppo_step")
-    ap.add_argument("--checkpoint", default="policy/pretrained/smappo_6.4_2.safetensors")
+    ap.add_argument("--checkpoint", default="policy/pretrained/smappo_moves_6.4_2.safetensors")
     ap.add_argument("--rounds", type=int, default=5)
     ap.add_argument("--steps", type=int, default=8)
     ap.add_argument("--threads", type=int, default=2)

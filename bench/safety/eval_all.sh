@@ -2,19 +2,22 @@
 # Issue 10's evaluation: every method on every setup the targets name (6.4_2, the paper's
 # Table III, 100.16_2), argmax, 3 seeds x 50 episodes, then the target table and the
 # Pareto plot. Usage: bench/safety/eval_all.sh [method ...] (default: all of them).
-# Methods: greedy, greedy-orca, smappo, smappo-orca, smappo-shield (the bundled 5-action
-# policy as before), and any NAME=CHECKPOINT[:orca|:shield] for a new checkpoint.
+# Methods: greedy, greedy-orca, targets (the bundled target-action policy, behind the
+# filter it was trained with), smappo, smappo-orca, smappo-shield (the paper's 5-move
+# policy, smappo_moves_6.4_2), and any NAME=CHECKPOINT[:orca|:shield] for a new checkpoint.
 set -euo pipefail
 cd "$(dirname "$0")/../.."
 bin="${TENDING_BIN:-target/release/tending}"
 setups="${SETUPS:-2.2_2,4.2_2,6.4_2,12.8_4,18.12_6,24.16_8,30.20_10,36.24_12,42.28_14,100.16_2}"
 out="${OUT:-docs/safety/eval}"
-old="${OLD_CKPT:-policy/pretrained/smappo_6.4_2.safetensors}"
+old="${OLD_CKPT:-policy/pretrained/smappo_moves_6.4_2.safetensors}"
+new="${NEW_CKPT:-policy/pretrained/smappo_6.4_2.safetensors}"
 methods=("$@")
-[ ${#methods[@]} -gt 0 ] || methods=(greedy greedy-orca smappo smappo-orca smappo-shield)
+[ ${#methods[@]} -gt 0 ] || methods=(greedy greedy-orca targets smappo smappo-orca smappo-shield)
 for m in "${methods[@]}"; do
     case "$m" in
         greedy|greedy-orca) args=(--policy "$m") ;;
+        targets) args=(--checkpoint "$new") ;;
         smappo) args=(--checkpoint "$old") ;;
         smappo-orca) args=(--checkpoint "$old" --orca-filter) ;;
         smappo-shield) args=(--checkpoint "$old" --shield) ;;

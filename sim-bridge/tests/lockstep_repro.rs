@@ -90,9 +90,10 @@ fn greedy_fleet_in_lockstep_reproduces_the_offline_episode() {
 }
 
 #[test]
-fn bundled_policy_fleet_in_lockstep_reproduces_the_offline_episode() {
+fn paper_policy_fleet_in_lockstep_reproduces_the_offline_episode() {
+    // The paper's 5-move policy, raw: its actions are stepped as the simulator's own.
     let path = PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-        .join("../policy/pretrained/smappo_6.4_2.safetensors");
+        .join("../policy/pretrained/smappo_moves_6.4_2.safetensors");
     if !path.exists() {
         eprintln!(
             "SKIPPED: no bundled checkpoint at {} (the greedy test covers lockstep)",

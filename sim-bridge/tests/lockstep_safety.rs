@@ -1,7 +1,8 @@
-//! Lockstep reproducibility of the safety controllers (docs/adr/0006): a fleet of
+//! Lockstep reproducibility of the safety controllers (docs/adr/0006, 0012): a fleet of
 //! `robot_node`s running greedy-ORCA (`controller:=greedy-orca`, stateful: it estimates
-//! velocities from successive observations) or the bundled policy behind the action shield
-//! (`shield:=true`) or through the ORCA filter (`orca_filter:=true`) must reproduce the
+//! velocities from successive observations), the paper's 5-move policy behind the action
+//! shield (`shield:=true`) or through the ORCA filter (`orca_filter:=true`), or the bundled
+//! target-action policy with robot_node's defaults (planner + filter) must reproduce the
 //! offline episode of the same code exactly.
 //! The harness (tests/lockstep_common) is lockstep_repro.rs's, with extra robot_node parameters.
 //!
@@ -56,6 +57,34 @@ fn offline_filtered(setup: Setup, seed: u64, steps: u32, path: &std::path::Path)
                 sim::action_to_velocity(a, k).unwrap()
             })
             .collect();
+        fleet.filter(&batch, &prefs, &mut vels).unwrap();
+        env.step_velocities(&vels).unwrap();
+    }
+    offline(&env)
+}
+
+/// The bundled target-action policy as robot_node runs it by default: the chosen box as a
+/// straight-line velocity (`obs::targets`), through the 40 mm ORCA filter.
+fn offline_targets(setup: Setup, seed: u64, steps: u32, path: &std::path::Path) -> Offline {
+    let mut env = Env::new(ScenarioConfig::default(), setup, seed).unwrap();
+    let mut fleet =
+        sim::baselines::GreedyOrcaFleet::new_filter(&env, obs::orca::FILTER_CLEARANCE).unwrap();
+    let planner = sim::baselines::GreedyOrcaFleet::new(&env).unwrap();
+    let mut pol = policy::Policy::load(path).unwrap();
+    assert_eq!(pol.actor().arch.actions, policy::ActionSpace::Targets);
+    let mut states: Vec<_> = (0..env.n_robots()).map(|_| pol.new_state()).collect();
+    let (mut batch, mut prefs, mut vels) = (obs::ObsBatch::default(), Vec::new(), Vec::new());
+    for _ in 0..steps {
+        env.observe(&mut batch);
+        let acts: Vec<u8> = (0..batch.rows)
+            .map(|r| {
+                pol.act(&batch.row(r), &mut states[r], policy::ActMode::Greedy)
+                    .unwrap()
+            })
+            .collect();
+        planner
+            .target_velocities(&batch, &acts, &mut prefs)
+            .unwrap();
         fleet.filter(&batch, &prefs, &mut vels).unwrap();
         env.step_velocities(&vels).unwrap();
     }
@@ -119,7 +148,7 @@ fn greedy_orca_fleet_in_lockstep_reproduces_the_offline_episode() {
 #[test]
 fn shielded_policy_fleet_in_lockstep_reproduces_the_offline_episode() {
     let path = PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-        .join("../policy/pretrained/smappo_6.4_2.safetensors");
+        .join("../policy/pretrained/smappo_moves_6.4_2.safetensors");
     if !path.exists() {
         eprintln!("SKIPPED: no bundled checkpoint at {}", path.display());
         return;
@@ -143,7 +172,7 @@ fn shielded_policy_fleet_in_lockstep_reproduces_the_offline_episode() {
 #[test]
 fn orca_filtered_policy_fleet_in_lockstep_reproduces_the_offline_episode() {
     let path = PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-        .join("../policy/pretrained/smappo_6.4_2.safetensors");
+        .join("../policy/pretrained/smappo_moves_6.4_2.safetensors");
     if !path.exists() {
         eprintln!("SKIPPED: no bundled checkpoint at {}", path.display());
         return;
@@ -162,4 +191,18 @@ fn orca_filtered_policy_fleet_in_lockstep_reproduces_the_offline_episode() {
         &["orca_filter:=true"],
     );
     assert_same("policy+orca", &off, &m, steps);
+}
+
+#[test]
+fn bundled_target_policy_fleet_in_lockstep_reproduces_the_offline_episode() {
+    let path = PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .join("../policy/pretrained/smappo_6.4_2.safetensors");
+    let setup = Setup::new(6, 4, 2);
+    let (seed, steps) = (2, 200);
+    let off = offline_targets(setup, seed, steps, &path);
+    assert!(off.delivered > 0, "choose a seed where the policy delivers");
+    let env0 = Env::new(ScenarioConfig::default(), setup, seed).unwrap();
+    // No parameters: the default (planner + 40 mm filter) is what is checked.
+    let m = fleet_lockstep(setup, seed, steps, domain(3), &env0, Some(&path), &[]);
+    assert_same("target policy", &off, &m, steps);
 }
