@@ -51,6 +51,19 @@ pub fn run_episode(
     seed: u64,
     episode: u64,
 ) -> Result<Metrics, TrainError> {
+    run_episode_watched(ctrl, cfg, setup, seed, episode, |_| {})
+}
+
+/// [`run_episode`], showing `on_step` the environment at the start and after every step
+/// (`tending sim --render` draws them).
+pub fn run_episode_watched(
+    ctrl: &Controller,
+    cfg: &ScenarioConfig,
+    setup: Setup,
+    seed: u64,
+    episode: u64,
+    mut on_step: impl FnMut(&Env),
+) -> Result<Metrics, TrainError> {
     let mut env = Env::new(cfg.clone(), setup, eval_env_seed(seed, episode))?;
     let mut rng = ChaCha8Rng::seed_from_u64(episode_seed(seed ^ 0x0005_EED0_FAC7, 1, episode));
     let n = env.n_robots();
@@ -92,6 +105,7 @@ pub fn run_episode(
     let mut obs = obs::ObsBatch::default();
     let mut actions = vec![0u8; n];
     while !env.is_done() {
+        on_step(&env);
         match ctrl {
             Controller::Random => {
                 for a in actions.iter_mut() {
@@ -164,6 +178,7 @@ pub fn run_episode(
         }
         env.step_actions(&actions)?;
     }
+    on_step(&env);
     Ok(*env.metrics())
 }
 
