@@ -1,13 +1,16 @@
-//! `tending sim`: episodes with a scripted policy, a metrics table, an optional animation.
+//! `tending sim`: episodes of a scripted baseline or a checkpoint, a metrics table, an
+//! optional animation of the first episode. Episodes run through `tending eval`'s episode
+//! runner ([`policy::train::run_episode_watched`]), so for the same setup, seed and
+//! controller both commands report the same numbers.
 
+use crate::render::Frame;
 use crate::report::{self, Numbers};
 use crate::stats::markdown_table;
 use anyhow::{bail, Context, Result};
 use clap::Args;
-use rand::SeedableRng;
-use rayon::prelude::*;
-use sim::baselines::{greedy_action, random_action, GreedyOrcaFleet, GreedyParams};
-use sim::{episode_seed, Env, Metrics, ScenarioConfig, Setup};
+use policy::train::{evaluate, run_episode_watched, Controller};
+use policy::Policy;
+use sim::{Env, Metrics, ScenarioConfig, Setup};
 use std::path::PathBuf;
 
 #[derive(Args, Debug)]
@@ -15,11 +18,25 @@ pub struct SimArgs {
     /// Setup N.M_K (robots.machines_storages), e.g. 14.10_4.
     #[arg(long, default_value = "6.4_2")]
     pub setup: String,
-    /// greedy | greedy-orca | random
-    #[arg(long, default_value = "greedy")]
+    /// Scripted baseline: greedy | greedy-orca | random.
+    #[arg(long, default_value = "greedy", conflicts_with = "checkpoint")]
     pub policy: String,
+    /// A policy checkpoint (.safetensors) instead of a scripted baseline, run as
+    /// `tending eval` runs it: argmax actions, behind the ORCA filter when it was trained
+    /// behind it.
+    #[arg(long)]
+    pub checkpoint: Option<PathBuf>,
+    /// Sample the checkpoint's actions instead of taking the most probable one.
+    #[arg(long, requires = "checkpoint")]
+    pub sample: bool,
+    /// Put the checkpoint's actions behind the one-step action shield (obs::shield).
+    #[arg(long, requires = "checkpoint")]
+    pub shield: bool,
+    /// Pass the checkpoint's actions through ORCA as a safety filter (obs::orca).
+    #[arg(long, requires = "checkpoint", conflicts_with = "shield")]
+    pub orca_filter: bool,
     #[arg(long, default_value_t = 20)]
-    pub episodes: usize,
+    pub episodes: u64,
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
     /// Scenario config (TOML); defaults are documented in sim/src/config.rs.
@@ -31,26 +48,6 @@ pub struct SimArgs {
     pub render: Option<PathBuf>,
 }
 
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub enum Scripted {
-    Greedy,
-    /// Greedy allocation + ORCA avoidance, continuous velocity commands.
-    GreedyOrca,
-    Random,
-}
-
-impl std::str::FromStr for Scripted {
-    type Err = anyhow::Error;
-    fn from_str(s: &str) -> Result<Self> {
-        match s {
-            "greedy" => Ok(Self::Greedy),
-            "greedy-orca" => Ok(Self::GreedyOrca),
-            "random" => Ok(Self::Random),
-            other => bail!("unknown --policy `{other}`: expected greedy, greedy-orca or random"),
-        }
-    }
-}
-
 pub fn load_config(path: &Option<PathBuf>) -> Result<ScenarioConfig> {
     Ok(match path {
         Some(p) => ScenarioConfig::load(p)?,
@@ -58,56 +55,37 @@ pub fn load_config(path: &Option<PathBuf>) -> Result<ScenarioConfig> {
     })
 }
 
-/// Run one episode with a scripted policy; `on_step` sees the env after every step.
-pub fn run_episode(
-    cfg: &ScenarioConfig,
-    setup: Setup,
-    policy: Scripted,
-    seed: u64,
-    mut on_step: impl FnMut(&Env),
-) -> Result<Metrics> {
-    let mut env = Env::new(cfg.clone(), setup, seed)?;
-    let params = GreedyParams {
-        sizes: *env.sizes(),
-        k_speed: cfg.task.k_speed,
-        dt: cfg.world.dt,
+/// The controller the arguments name, and its label for the table.
+fn controller(a: &SimArgs) -> Result<(Controller, String)> {
+    let Some(path) = &a.checkpoint else {
+        let c = match a.policy.as_str() {
+            "greedy" => Controller::Greedy,
+            "greedy-orca" => Controller::GreedyOrca,
+            "random" => Controller::Random,
+            o => bail!("unknown --policy `{o}`: expected greedy, greedy-orca or random"),
+        };
+        return Ok((c, a.policy.clone()));
     };
-    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed ^ 0xA5A5);
-    let mut obs = obs::ObsBatch::default();
-    let mut actions = Vec::new();
-    let mut orca = GreedyOrcaFleet::new(&env)?;
-    let mut vels = Vec::new();
-    on_step(&env);
-    while !env.is_done() {
-        actions.clear();
-        match policy {
-            Scripted::Random => {
-                actions.extend((0..env.n_robots()).map(|_| random_action(&mut rng)));
-            }
-            Scripted::Greedy => {
-                env.observe(&mut obs);
-                actions.extend((0..obs.rows).map(|r| {
-                    greedy_action(
-                        obs.own_row(r),
-                        obs.machines_row(r),
-                        obs.storages_row(r),
-                        obs.peers_row(r),
-                        &params,
-                    )
-                }));
-            }
-            Scripted::GreedyOrca => {
-                env.observe(&mut obs);
-                orca.act(&obs, &mut vels)?;
-                env.step_velocities(&vels)?;
-                on_step(&env);
-                continue;
-            }
-        }
-        env.step_actions(&actions)?;
-        on_step(&env);
-    }
-    Ok(*env.metrics())
+    let pol = Policy::load(path).with_context(|| format!("--checkpoint {}", path.display()))?;
+    let (actor, sample) = (Box::new(pol.actor().clone()), a.sample);
+    let (c, mode) = if a.shield {
+        (Controller::Shielded { actor, sample }, "+shield")
+    } else if a.orca_filter || pol.trained_with_orca_filter() {
+        let clearance = obs::orca::FILTER_CLEARANCE;
+        let c = Controller::Filtered {
+            actor,
+            sample,
+            clearance,
+        };
+        (c, "+orca")
+    } else {
+        (Controller::Learned { actor, sample }, "")
+    };
+    let file = path
+        .file_name()
+        .and_then(|f| f.to_str())
+        .unwrap_or("checkpoint");
+    Ok((c, format!("{}{mode} ({file})", pol.kind())))
 }
 
 /// The table row of one policy on one setup: mean (std) over episodes.
@@ -118,40 +96,39 @@ pub fn metrics_row(label: &str, setup: Setup, ms: &[Metrics]) -> Vec<String> {
     row
 }
 
-pub fn run(a: SimArgs) -> Result<()> {
-    let cfg = load_config(&a.config)?;
+/// The episodes `a` asks for (the first one drawn with `--render`), and the label.
+fn episodes(a: &SimArgs, cfg: &ScenarioConfig) -> Result<(String, Vec<Metrics>)> {
     let setup: Setup = a.setup.parse()?;
-    let policy: Scripted = a.policy.parse()?;
     if a.episodes == 0 {
         bail!("--episodes must be at least 1");
     }
     // Fail fast on a setup that cannot fit, before spawning work.
     Env::new(cfg.clone(), setup, a.seed).with_context(|| format!("setup {setup}"))?;
+    let (ctrl, label) = controller(a)?;
     if let Some(path) = &a.render {
         let mut frames = Vec::new();
-        run_episode(&cfg, setup, policy, episode_seed(a.seed, 0, 0), |env| {
-            frames.push(crate::render::Frame::capture(env))
+        run_episode_watched(&ctrl, cfg, setup, a.seed, 0, |env| {
+            frames.push(Frame::capture(env))
         })?;
-        crate::render::write(path, &cfg, &frames)?;
+        crate::render::write(path, cfg, &frames)?;
         eprintln!("rendered {} frames to {}", frames.len(), path.display());
     }
+    let ms = evaluate(&ctrl, cfg, setup, a.seed, a.episodes)
+        .with_context(|| format!("{label} on {setup}"))?;
+    Ok((label, ms))
+}
+
+pub fn run(a: SimArgs) -> Result<()> {
+    let cfg = load_config(&a.config)?;
     let t0 = std::time::Instant::now();
-    let ms: Vec<Metrics> = (0..a.episodes)
-        .into_par_iter()
-        .map(|ep| {
-            run_episode(
-                &cfg,
-                setup,
-                policy,
-                episode_seed(a.seed, 0, ep as u64),
-                |_| {},
-            )
-        })
-        .collect::<Result<_>>()?;
+    let (label, ms) = episodes(&a, &cfg)?;
+    let setup: Setup = a.setup.parse()?;
     let mut header = vec!["policy", "setup", "episodes"];
     header.extend(report::COLUMNS);
-    let table = markdown_table(&header, &[metrics_row(&a.policy, setup, &ms)]);
-    println!("{table}");
+    println!(
+        "{}",
+        markdown_table(&header, &[metrics_row(&label, setup, &ms)])
+    );
     eprintln!(
         "{} episodes in {:.2} s (seed {}, k_speed {} m/s, {} steps)",
         a.episodes,
@@ -161,4 +138,92 @@ pub fn run(a: SimArgs) -> Result<()> {
         cfg.world.episode_steps
     );
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use clap::Parser;
+
+    #[derive(Parser)]
+    struct Cli {
+        #[command(flatten)]
+        a: SimArgs,
+    }
+
+    fn args(extra: &[&str]) -> SimArgs {
+        Cli::try_parse_from(["sim"].iter().chain(extra)).unwrap().a
+    }
+
+    /// `tending sim` and `tending eval` report the same metrics for the same setup, seed
+    /// and controller (scripted or learned), and the rendered episode is episode 0.
+    #[test]
+    fn sim_and_eval_agree_and_render_the_first_episode() {
+        let mut cfg = ScenarioConfig::default();
+        cfg.world.episode_steps = 60;
+        let setup: Setup = "4.2_2".parse().unwrap();
+        let pretrained = concat!(env!("CARGO_MANIFEST_DIR"), "/policy/pretrained/");
+        let moves = format!("{pretrained}smappo_moves_6.4_2.safetensors");
+        let bundled = format!("{pretrained}smappo_6.4_2.safetensors");
+        let actor = |p: &str| Box::new(Policy::load(p).unwrap().actor().clone());
+        let dir = std::env::temp_dir().join(format!("tending-sim-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let gif = dir.join("ep.gif");
+        for (flags, ctrl) in [
+            (vec!["--policy", "random"], Controller::Random),
+            (vec!["--policy", "greedy"], Controller::Greedy),
+            (vec!["--policy", "greedy-orca"], Controller::GreedyOrca),
+            (
+                vec!["--checkpoint", &moves],
+                Controller::Learned {
+                    actor: actor(&moves),
+                    sample: false,
+                },
+            ),
+            // trained behind the ORCA filter: run behind it, as eval and robot_node do
+            (
+                vec!["--checkpoint", &bundled],
+                Controller::Filtered {
+                    actor: actor(&bundled),
+                    sample: false,
+                    clearance: obs::orca::FILTER_CLEARANCE,
+                },
+            ),
+        ] {
+            let mut v = vec!["--setup", "4.2_2", "--seed", "7", "--episodes", "3"];
+            v.extend(flags);
+            let (_, sim) = episodes(&args(&v), &cfg).unwrap();
+            let eval = evaluate(&ctrl, &cfg, setup, 7, 3).unwrap();
+            assert_eq!(sim, eval, "{v:?}");
+            let mut frames = 0;
+            let first = run_episode_watched(&ctrl, &cfg, setup, 7, 0, |_| frames += 1).unwrap();
+            assert_eq!(first, eval[0], "{v:?}");
+            assert_eq!(frames, 61, "the start and every step");
+        }
+        let a = args(&[
+            "--checkpoint",
+            &bundled,
+            "--render",
+            gif.to_str().unwrap(),
+            "--episodes",
+            "1",
+        ]);
+        episodes(&a, &cfg).unwrap();
+        assert!(std::fs::metadata(&gif).unwrap().len() > 1000);
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+
+    #[test]
+    fn bad_arguments_are_clear_errors() {
+        let cfg = ScenarioConfig::default();
+        let e = episodes(&args(&["--policy", "greedy-lol"]), &cfg).unwrap_err();
+        assert!(e.to_string().contains("--policy `greedy-lol`"), "{e}");
+        let e = episodes(&args(&["--checkpoint", "/nonexistent.safetensors"]), &cfg).unwrap_err();
+        assert!(
+            format!("{e:#}").contains("/nonexistent.safetensors"),
+            "{e:#}"
+        );
+        assert!(Cli::try_parse_from(["sim", "--sample"]).is_err());
+        assert!(Cli::try_parse_from(["sim", "--policy", "random", "--checkpoint", "x"]).is_err());
+    }
 }
