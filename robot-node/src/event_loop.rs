@@ -22,7 +22,7 @@ use crate::fanout;
 use crate::hosted::{host, lockstep_step, print_stats_json, tick_now, Hosted};
 use crate::node::{retry, RobotSpec};
 use crate::readers::{drain, Readers, Sub, SubKind};
-use crate::watchdog::{Stage, Watchdog};
+use crate::watchdog::{NodeStage, Watchdog};
 use crate::world::{Counters, DropReason};
 
 const CLOCK_TOKEN: Token = Token(usize::MAX - 1);
@@ -41,7 +41,7 @@ pub(crate) fn run(
     wd: &Watchdog,
 ) -> anyhow::Result<Counters> {
     let mut l = EventLoop::new(p, stop, ctx, node, robots, multi, wd)?;
-    wd.stage(Stage::Running);
+    wd.stage(NodeStage::Running);
     while !stop.load(Ordering::SeqCst) {
         wd.beat();
         l.wait()?;
@@ -97,7 +97,7 @@ impl<'a> EventLoop<'a> {
         multi: bool,
         wd: &'a Watchdog,
     ) -> anyhow::Result<Self> {
-        wd.stage(Stage::Writers);
+        wd.stage(NodeStage::Writers);
         let hosted = host(p, stop, ctx, node, robots, multi, wd)?;
         let log = node.logging_handle();
         let t0 = Instant::now();
@@ -124,7 +124,7 @@ impl<'a> EventLoop<'a> {
             sim_last_index: None,
             sim_last_t: f64::NEG_INFINITY,
         };
-        wd.stage(Stage::Subscriptions);
+        wd.stage(NodeStage::Subscriptions);
         l.subscribe_own(stop)?;
         l.log_start();
         let n = l.hosted.len();
@@ -295,9 +295,9 @@ impl<'a> EventLoop<'a> {
                 continue;
             }
             self.readers.known.insert(topic.clone());
-            self.wd.stage(Stage::DiscoveredSubscription);
+            self.wd.stage(NodeStage::DiscoveredSubscription);
             let added = self.add_sub(topic.clone());
-            self.wd.stage(Stage::Running);
+            self.wd.stage(NodeStage::Running);
             match added {
                 Ok(()) => {
                     fanout::touch(self.hosted.iter_mut().map(|h| &mut h.brain), &topic);

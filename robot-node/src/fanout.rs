@@ -107,14 +107,14 @@ pub fn tick_offset(i: usize, n: usize, period: Duration) -> Duration {
 mod tests {
     use super::*;
     use crate::controller::GreedyController;
-    use crate::world::{World, WorldConfig};
+    use crate::world::{World, WorldModelConfig};
     use msgs::topics::{machine, robot, storage};
     use msgs::{Leaf, RoomBounds, Time};
 
     fn brain(me: &str) -> Brain {
         let w = World::new(
             me,
-            WorldConfig {
+            WorldModelConfig {
                 stale_timeout_s: 1.0,
                 static_stale_timeout_s: 1.0,
                 room: RoomBounds::default(),

@@ -19,7 +19,7 @@ use crate::args::Params;
 use crate::node::{retry, RobotSpec};
 use crate::tick::{Brain, Outcome, TickResult};
 use crate::watchdog::Watchdog;
-use crate::world::{Counters, World, WorldConfig};
+use crate::world::{Counters, World, WorldModelConfig};
 
 /// One hosted robot: its brain (world model, controller, counters), its `cmd_vel` writer
 /// and its timing state.
@@ -61,7 +61,7 @@ pub(crate) fn host(
     multi: bool,
     wd: &Watchdog,
 ) -> anyhow::Result<Vec<Hosted>> {
-    let wcfg = WorldConfig {
+    let wcfg = WorldModelConfig {
         stale_timeout_s: p.stale_timeout_s,
         static_stale_timeout_s: p.static_stale_timeout_s,
         room: msgs::RoomBounds {

@@ -21,7 +21,7 @@ use ros::{NodeSpec, RosNode};
 
 use crate::args::{ControllerKind, Params};
 use crate::controller::{Controller, GreedyController, GreedyOrcaController, PolicyController};
-use crate::watchdog::{Stage, Watchdog};
+use crate::watchdog::{NodeStage, Watchdog};
 use crate::world::Counters;
 use obs::greedy::GreedyParams;
 
@@ -113,7 +113,7 @@ pub fn run(p: &Params, stop: &AtomicBool) -> anyhow::Result<Counters> {
 /// [`run`], reporting its start-up stages and event-loop heartbeat to `wd`
 /// ([`crate::watchdog`]).
 pub fn run_watched(p: &Params, stop: &AtomicBool, wd: &Watchdog) -> anyhow::Result<Counters> {
-    wd.stage(Stage::Controller);
+    wd.stage(NodeStage::Controller);
     let multi = !p.robots.is_empty();
     let names: Vec<String> = if multi {
         p.robots.clone()
@@ -139,7 +139,7 @@ pub fn run_watched(p: &Params, stop: &AtomicBool, wd: &Watchdog) -> anyhow::Resu
         robots.push((name, controller, k_speed));
         wd.beat(); // start-up progress
     }
-    wd.stage(Stage::Context);
+    wd.stage(NodeStage::Context);
     let ctx = ros::context(p.domain_id)?;
     if multi {
         info!(
@@ -191,7 +191,7 @@ fn run_on(
     multi: bool,
     wd: &Watchdog,
 ) -> anyhow::Result<Counters> {
-    wd.stage(Stage::Node);
+    wd.stage(NodeStage::Node);
     let spin_name = if multi {
         "spin".to_string()
     } else {
@@ -204,7 +204,7 @@ fn run_on(
     };
     let mut ros = retry("node", stop, wd, || RosNode::start(ctx, &spec, &spin_name))?;
     let result = crate::event_loop::run(p, stop, ctx, ros.node(), robots, multi, wd);
-    wd.stage(Stage::Done);
+    wd.stage(NodeStage::Done);
     drop(ros); // stops the spinner
     result
 }

@@ -123,7 +123,7 @@ impl Brain {
 mod tests {
     use super::*;
     use crate::controller::GreedyController;
-    use crate::world::WorldConfig;
+    use crate::world::WorldModelConfig;
     use msgs::topics::{machine, robot, storage};
     use msgs::{Leaf, PoseStamped, RoomBounds, Time};
 
@@ -146,7 +146,7 @@ mod tests {
     fn world() -> World {
         World::new(
             "robot_0",
-            WorldConfig {
+            WorldModelConfig {
                 stale_timeout_s: 1.0,
                 static_stale_timeout_s: 1.0,
                 room: RoomBounds::default(),

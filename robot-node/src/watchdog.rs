@@ -5,11 +5,11 @@
 pub use ros::watchdog::{Limits, Stuck, EXIT_WATCHDOG};
 
 /// The watchdog over robot_node's stages.
-pub type Watchdog = ros::watchdog::Watchdog<Stage>;
+pub type Watchdog = ros::watchdog::Watchdog<NodeStage>;
 
 ros::watchdog_stages! {
     /// Where the main path is.
-    pub enum Stage {
+    pub enum NodeStage {
         startup {
         /// Loading the controller(s).
         Controller => "loading the controller",
@@ -40,7 +40,7 @@ mod tests {
     #[test]
     fn the_message_names_the_stage() {
         let v = ros::watchdog::verdict(
-            Stage::Node,
+            NodeStage::Node,
             std::time::Duration::from_secs(12),
             std::time::Duration::from_secs(1),
             &Limits::from_secs(10.0, 10.0),

@@ -206,9 +206,10 @@ impl std::fmt::Display for Counters {
     }
 }
 
-/// Staleness and validation settings.
+/// The world model's staleness and validation settings (not the simulator's
+/// `sim::WorldConfig`, which is the simulated room and its clock).
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub struct WorldConfig {
+pub struct WorldModelConfig {
     /// Robots (own and peers): no sample for this long -> stale.
     pub stale_timeout_s: f64,
     /// Machines and storages; <= 0 = never stale.
@@ -219,7 +220,7 @@ pub struct WorldConfig {
 /// Latest data about self, machines, storages and peers.
 #[derive(Debug, Clone)]
 pub struct World {
-    pub cfg: WorldConfig,
+    pub cfg: WorldModelConfig,
     /// This robot's id (namespace without the leading slash).
     pub me: String,
     own: EntityState,
@@ -287,7 +288,7 @@ pub fn admit<T>(
 }
 
 impl World {
-    pub fn new(me: &str, cfg: WorldConfig) -> Self {
+    pub fn new(me: &str, cfg: WorldModelConfig) -> Self {
         Self {
             cfg,
             me: me.trim_matches('/').to_string(),
@@ -551,8 +552,8 @@ mod tests {
     use msgs::topics::{machine, robot, storage};
     use msgs::{PoseStamped, Time};
 
-    fn cfg() -> WorldConfig {
-        WorldConfig {
+    fn cfg() -> WorldModelConfig {
+        WorldModelConfig {
             stale_timeout_s: 1.0,
             static_stale_timeout_s: 2.0,
             room: RoomBounds::default(),

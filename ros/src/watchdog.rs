@@ -1,6 +1,6 @@
 //! Start-up / stall watchdog for a node process.
 //!
-//! A node records the [`Stage`] it is in and a heartbeat (two atomics): during start-up at
+//! A node records the [`NodeStage`] it is in and a heartbeat (two atomics): during start-up at
 //! every stage, entity created and retry attempt (so a long but progressing start-up, e.g.
 //! 100 robots in one process, is not cut short), once running every event-loop iteration.
 //! A helper thread checks them with [`verdict`] (a pure function of the times, tested with
@@ -20,8 +20,9 @@ use std::time::{Duration, Instant};
 /// Exit code of a process the watchdog ended (`EX_TEMPFAIL`: try again).
 pub const EXIT_WATCHDOG: i32 = 75;
 
-/// The stages of one kind of node (an enum with a `u8` representation).
-pub trait Stage: Copy + Eq + fmt::Debug + Send + Sync + 'static {
+/// The stages of one kind of node (an enum with a `u8` representation): where its main
+/// path is, for the watchdog (not a curriculum stage of training, `policy::train::Stage`).
+pub trait NodeStage: Copy + Eq + fmt::Debug + Send + Sync + 'static {
     /// The stage a new watchdog starts in.
     const FIRST: Self;
     fn to_u8(self) -> u8;
@@ -35,23 +36,23 @@ pub trait Stage: Copy + Eq + fmt::Debug + Send + Sync + 'static {
     fn describe(self) -> &'static str;
 }
 
-/// Defines a node's stage enum and its [`Stage`] implementation from one list: each stage
+/// Defines a node's stage enum and its [`NodeStage`] implementation from one list: each stage
 /// with its description, in order: the start-up stages (the start-up limit applies), the
 /// running ones (the stall limit applies), and the done stage (not watched).
 ///
 /// ```
 /// ros::watchdog_stages! {
 ///     /// Where the example node is.
-///     pub enum Stage {
+///     pub enum NodeStage {
 ///         startup { Context => "creating the DDS context", }
 ///         running { Running => "in the event loop", }
 ///         done Done => "in shutdown",
 ///     }
 /// }
-/// use ros::watchdog::Stage as _;
-/// assert!(Stage::Context.is_startup() && !Stage::Running.is_startup());
-/// assert!(Stage::Done.is_done());
-/// assert_eq!(Stage::from_u8(1), Stage::Running);
+/// use ros::watchdog::NodeStage as _;
+/// assert!(NodeStage::Context.is_startup() && !NodeStage::Running.is_startup());
+/// assert!(NodeStage::Done.is_done());
+/// assert_eq!(NodeStage::from_u8(1), NodeStage::Running);
 /// ```
 #[macro_export]
 macro_rules! watchdog_stages {
@@ -83,7 +84,7 @@ macro_rules! watchdog_stages {
                 &[$( $name::$start, )+ $name::$first_loop, $( $name::$rest, )* $name::$done];
         }
 
-        impl $crate::watchdog::Stage for $name {
+        impl $crate::watchdog::NodeStage for $name {
             const FIRST: Self = Self::ALL[0];
 
             fn to_u8(self) -> u8 {
@@ -151,7 +152,7 @@ pub struct Stuck<S> {
     pub for_: Duration,
 }
 
-impl<S: Stage> fmt::Display for Stuck<S> {
+impl<S: NodeStage> fmt::Display for Stuck<S> {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         let what = if self.startup {
             "start-up made no progress"
@@ -168,7 +169,7 @@ impl<S: Stage> fmt::Display for Stuck<S> {
 }
 
 /// The decision, from the stage and times measured from the watchdog's creation.
-pub fn verdict<S: Stage>(
+pub fn verdict<S: NodeStage>(
     stage: S,
     now: Duration,
     last_beat: Duration,
@@ -192,7 +193,7 @@ pub fn verdict<S: Stage>(
 
 /// Shared state: the stage and the last heartbeat (µs since `t0`).
 #[derive(Debug)]
-pub struct Watchdog<S: Stage> {
+pub struct Watchdog<S: NodeStage> {
     t0: Instant,
     stage: AtomicU8,
     beat_us: AtomicU64,
@@ -200,7 +201,7 @@ pub struct Watchdog<S: Stage> {
     _stage: PhantomData<S>,
 }
 
-impl<S: Stage> Watchdog<S> {
+impl<S: NodeStage> Watchdog<S> {
     pub fn new(limits: Limits) -> Arc<Self> {
         Arc::new(Watchdog {
             t0: Instant::now(),

@@ -19,7 +19,7 @@ use ros::{publisher, stamp_key_info, subscription, NodeSpec, RosNode, StampedWri
 use crate::core::{Core, MetricsLine};
 use crate::delay::DelayQueue;
 use crate::params::{BridgeParams, Mode};
-use crate::watchdog::{Stage, Watchdog};
+use crate::watchdog::{NodeStage, Watchdog};
 
 struct EntityWriters {
     pose: StampedWriter<PoseStamped>,
@@ -95,11 +95,11 @@ pub fn run_watched(
     wd: &Watchdog,
 ) -> anyhow::Result<MetricsLine> {
     let t0 = Instant::now();
-    wd.stage(Stage::Core);
+    wd.stage(NodeStage::Core);
     let mut core = Core::new(p.clone(), 0.0)?;
-    wd.stage(Stage::Context);
+    wd.stage(NodeStage::Context);
     let ctx = ros::context(p.domain_id)?;
-    wd.stage(Stage::Node);
+    wd.stage(NodeStage::Node);
     let spec = NodeSpec {
         namespace: &p.namespace,
         name: &p.node_name,
@@ -107,7 +107,7 @@ pub fn run_watched(
     };
     let mut ros = RosNode::start(&ctx, &spec, "ros2-spinner")?;
     let r = event_loop(&p, stop, &ctx, ros.node(), &mut core, t0, wd);
-    wd.stage(Stage::Done);
+    wd.stage(NodeStage::Done);
     drop(ros); // stops the spinner
     r
 }
@@ -122,7 +122,7 @@ fn event_loop(
     wd: &Watchdog,
 ) -> anyhow::Result<MetricsLine> {
     let mut b = Bridge::new(p, ctx, node, core, t0, wd)?;
-    wd.stage(Stage::Running);
+    wd.stage(NodeStage::Running);
     while !stop.load(Ordering::SeqCst) {
         wd.beat();
         b.wait()?;
@@ -371,7 +371,7 @@ impl<'a> Bridge<'a> {
         t0: Instant,
         wd: &'a Watchdog,
     ) -> anyhow::Result<Self> {
-        wd.stage(Stage::Endpoints);
+        wd.stage(NodeStage::Endpoints);
         let out = Outputs::new(node)?;
         let poll = Poll::new().context("mio poll")?;
         let mut command_sub: Subscription<StdString> =
@@ -570,12 +570,12 @@ impl<'a> Bridge<'a> {
             }
             if let Entity::Robot(name) = &topic.entity {
                 if !self.cmd_subs.iter().any(|(n, _)| n == name) {
-                    self.wd.stage(Stage::EntityEndpoints);
+                    self.wd.stage(NodeStage::EntityEndpoints);
                     match self.subscribe_cmd(name) {
                         Ok(()) => info!("discovered /{name}/cmd_vel"),
                         Err(e) => warn!("cannot subscribe to /{name}/cmd_vel: {e:#}"),
                     }
-                    self.wd.stage(Stage::Running);
+                    self.wd.stage(NodeStage::Running);
                 }
             }
         }

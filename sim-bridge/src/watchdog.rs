@@ -6,11 +6,11 @@
 pub use ros::watchdog::{Limits, Stuck, EXIT_WATCHDOG};
 
 /// The watchdog over sim_bridge's stages.
-pub type Watchdog = ros::watchdog::Watchdog<Stage>;
+pub type Watchdog = ros::watchdog::Watchdog<NodeStage>;
 
 ros::watchdog_stages! {
     /// Where the bridge is.
-    pub enum Stage {
+    pub enum NodeStage {
         startup {
         Core => "building the simulator",
         Context => "creating the DDS context",
