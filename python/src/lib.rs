@@ -20,13 +20,13 @@ use numpy::{
     IntoPyArray, PyArray1, PyArray2, PyArray3, PyArrayDyn, PyArrayMethods, PyReadonlyArrayDyn,
     PyUntypedArrayMethods,
 };
+use obs::greedy::GreedyParams;
 use obs::{FlatLayout, ObsBatch, MACHINE_DIM, PEER_DIM, SELF_DIM, STORAGE_DIM};
 use pyo3::create_exception;
 use pyo3::exceptions::{PyTypeError, PyValueError};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 use rayon::prelude::*;
-use sim::baselines::GreedyParams;
 use sim::{episode_seed, Env, MachineId, Metrics, RobotId, ScenarioConfig, Setup, StorageId};
 
 create_exception!(
@@ -213,11 +213,7 @@ fn greedy_rows(
 }
 
 fn greedy_params(env: &Env) -> GreedyParams {
-    GreedyParams {
-        sizes: *env.sizes(),
-        k_speed: env.config().task.k_speed,
-        dt: env.config().world.dt,
-    }
+    sim::baselines::greedy_params(env.sizes(), env.config())
 }
 
 /// Read four observation arrays (as returned by `observe`) as contiguous f32 slices of

@@ -15,11 +15,7 @@ use sim::{Env, ScenarioConfig, Setup};
 fn offline_greedy(setup: Setup, seed: u64, steps: u32) -> (Offline, Env) {
     let mut env = Env::new(ScenarioConfig::default(), setup, seed).unwrap();
     let first = env.clone();
-    let params = sim::baselines::GreedyParams {
-        sizes: *env.sizes(),
-        k_speed: env.config().task.k_speed,
-        dt: env.config().world.dt,
-    };
+    let params = sim::baselines::greedy_params(env.sizes(), env.config());
     let mut batch = obs::ObsBatch::default();
     for _ in 0..steps {
         env.observe(&mut batch);

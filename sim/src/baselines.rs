@@ -5,6 +5,7 @@
 //! unchanged on a robot.
 
 use crate::{Env, ScenarioConfig, SimError, Sizes, N_ACTIONS};
+use obs::greedy::GreedyParams;
 use obs::orca::{GreedyOrca, OrcaParams};
 use obs::shield::ShieldParams;
 use obs::ObsBatch;
@@ -15,48 +16,26 @@ pub fn random_action<R: Rng>(rng: &mut R) -> u8 {
     rng.gen_range(0..N_ACTIONS as u8)
 }
 
-/// What the greedy controller knows about the world besides its observation.
-#[derive(Debug, Clone, Copy)]
-pub struct GreedyParams {
-    pub sizes: Sizes,
-    pub k_speed: f32,
-    pub dt: f32,
-}
-
 /// Decentralized greedy: without a part, head for the nearest ready machine that no
-/// nearer part-less peer is closer to; with a part, the nearest storage (see
-/// [`obs::greedy::greedy_action`], the one implementation `robot_node` runs too).
-pub fn greedy_action(
-    own: &[f32],
-    machines: &[f32],
-    storages: &[f32],
-    peers: &[f32],
-    p: &GreedyParams,
-) -> u8 {
-    obs::greedy::greedy_action(own, machines, storages, peers, &p.to_obs())
-}
+/// nearer part-less peer is closer to; with a part, the nearest storage (the one
+/// implementation, which `robot_node` runs too).
+pub use obs::greedy::greedy_action;
 
-impl GreedyParams {
-    /// The same parameters in the simulator-free form of [`obs::greedy`].
-    pub fn to_obs(&self) -> obs::greedy::GreedyParams {
-        obs::greedy::GreedyParams {
-            robot_radius: self.sizes.robot_radius,
-            machine_half: self.sizes.machine_half,
-            storage_half: self.sizes.storage_half,
-            k_speed: self.k_speed,
-            dt: self.dt,
-        }
+/// What the greedy controller knows about an environment besides its observation: its
+/// body sizes, action speed and control period.
+pub fn greedy_params(sizes: &Sizes, cfg: &ScenarioConfig) -> GreedyParams {
+    GreedyParams {
+        robot_radius: sizes.robot_radius,
+        machine_half: sizes.machine_half,
+        storage_half: sizes.storage_half,
+        k_speed: cfg.task.k_speed,
+        dt: cfg.world.dt,
     }
 }
 
 /// Greedy-ORCA parameters of an environment (its sizes, speed, period and room).
 pub fn orca_params(sizes: &Sizes, cfg: &ScenarioConfig) -> OrcaParams {
-    let g = GreedyParams {
-        sizes: *sizes,
-        k_speed: cfg.task.k_speed,
-        dt: cfg.world.dt,
-    };
-    OrcaParams::new(g.to_obs(), cfg.world.room_size, sizes.reach)
+    OrcaParams::new(greedy_params(sizes, cfg), cfg.world.room_size, sizes.reach)
 }
 
 /// Shield parameters of an environment. The margin is the simulator's collision distance
@@ -202,13 +181,9 @@ mod tests {
 
     fn params() -> GreedyParams {
         GreedyParams {
-            sizes: Sizes {
-                scale: 1.0,
-                robot_radius: 0.08,
-                machine_half: [0.12, 0.12],
-                storage_half: [0.15, 0.08],
-                reach: 0.08,
-            },
+            robot_radius: 0.08,
+            machine_half: [0.12, 0.12],
+            storage_half: [0.15, 0.08],
             k_speed: 0.5,
             dt: 0.1,
         }

@@ -1,17 +1,13 @@
 //! Greedy-ORCA against plain greedy: same allocation, ORCA avoidance instead of greedy's
 //! axis moves. It must deliver at least as many parts with far fewer contacts.
 
-use sim::baselines::{greedy_action, GreedyOrcaFleet, GreedyParams};
+use sim::baselines::{greedy_action, greedy_params, GreedyOrcaFleet};
 use sim::{episode_seed, Env, Metrics, ScenarioConfig, Setup};
 
 fn episode(setup: Setup, seed: u64, orca: bool) -> Metrics {
     let cfg = ScenarioConfig::default();
     let mut env = Env::new(cfg.clone(), setup, seed).unwrap();
-    let gp = GreedyParams {
-        sizes: *env.sizes(),
-        k_speed: cfg.task.k_speed,
-        dt: cfg.world.dt,
-    };
+    let gp = greedy_params(env.sizes(), &cfg);
     let mut fleet = GreedyOrcaFleet::new(&env).unwrap();
     let mut o = obs::ObsBatch::default();
     let (mut acts, mut vels) = (Vec::new(), Vec::new());

@@ -7,7 +7,7 @@ use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use rayon::prelude::*;
 use sim::baselines::{
-    greedy_action, random_action, shield_logits, shield_params, GreedyOrcaFleet, GreedyParams,
+    greedy_action, greedy_params, random_action, shield_logits, shield_params, GreedyOrcaFleet,
 };
 use sim::{action_to_velocity, episode_seed, Env, Metrics, ScenarioConfig, Setup};
 
@@ -67,11 +67,7 @@ pub fn run_episode_watched(
     let mut env = Env::new(cfg.clone(), setup, eval_env_seed(seed, episode))?;
     let mut rng = ChaCha8Rng::seed_from_u64(episode_seed(seed ^ 0x0005_EED0_FAC7, 1, episode));
     let n = env.n_robots();
-    let params = GreedyParams {
-        sizes: *env.sizes(),
-        k_speed: cfg.task.k_speed,
-        dt: cfg.world.dt,
-    };
+    let params = greedy_params(env.sizes(), cfg);
     let mut actor = match ctrl {
         Controller::Learned { actor, .. }
         | Controller::Shielded { actor, .. }
