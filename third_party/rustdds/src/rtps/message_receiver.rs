@@ -354,7 +354,12 @@ impl MessageReceiver {
                  message decoding."
               )
             }
-            Err(e) => return error!("{e:?}"),
+            Err(e) => {
+              return error!(
+                "Cannot decode an RTPS message from {:?}: {e:?}",
+                self.source_guid_prefix
+              )
+            }
           }
         } else {
           if security_plugins.rtps_not_protected(&self.dest_guid_prefix) {
@@ -718,7 +723,14 @@ impl MessageReceiver {
               source_guid,
               &reader.guid(),
             )
-            .map_err(|e| error!("{e:?}")),
+            .map_err(|e| {
+              error!(
+                "Cannot decode DATA from writer {source_guid:?} for reader {:?} on topic {}: \
+                 {e:?}",
+                reader.guid(),
+                reader.topic_name()
+              )
+            }),
           None => Ok(encoded_payload),
         },
       )

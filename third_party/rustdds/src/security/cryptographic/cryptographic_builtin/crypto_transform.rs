@@ -785,8 +785,6 @@ impl CryptoTransform for CryptographicBuiltin {
       return Err(security_error("Encoded payload smaller than minimum size"));
     }
     let (header_bytes, content_and_footer_bytes) = encoded_buffer.split_at(head_len);
-    let (content_bytes, footer_bytes) =
-      content_and_footer_bytes.split_at(content_and_footer_bytes.len() - foot_len);
 
     // Deserialize crypto header and footer
 
@@ -802,6 +800,9 @@ impl CryptoTransform for CryptographicBuiltin {
         },
       builtin_crypto_header_extra: BuiltinCryptoHeaderExtra(initialization_vector),
     } = crypto_header.try_into()?;
+
+    let (content_bytes, footer_bytes) =
+      split_content_and_footer(content_and_footer_bytes, transformation_kind, foot_len)?;
 
     let BuiltinCryptoFooter { common_mac, .. } = BuiltinCryptoFooter::try_from(footer_bytes)?;
 
@@ -845,5 +846,80 @@ impl CryptoTransform for CryptographicBuiltin {
         decrypt(decode_key, initialization_vector, &ciphertext, common_mac)
       }
     }
+  }
+}
+
+/// Split an encoded payload (after its CryptoHeader) into content and CryptoFooter.
+///
+/// The serialized payload of a DATA submessage is padded to a multiple of 4 bytes
+/// (RTPS 9.4.1), and the padding is indistinguishable from payload. An encrypted
+/// payload's CryptoContent carries its length, so its footer is found right after it
+/// and any trailing padding is ignored. (Taking the footer from the end of the buffer
+/// failed the MAC check of every sample whose encoded length is not a multiple of 4,
+/// e.g. a 5-byte std_msgs/Bool.) A signed-only payload has no length marker; its
+/// footer is taken from the end.
+fn split_content_and_footer(
+  buf: &[u8],
+  transformation_kind: BuiltinCryptoTransformationKind,
+  foot_len: usize,
+) -> SecurityResult<(&[u8], &[u8])> {
+  match transformation_kind {
+    BuiltinCryptoTransformationKind::CRYPTO_TRANSFORMATION_KIND_AES128_GCM
+    | BuiltinCryptoTransformationKind::CRYPTO_TRANSFORMATION_KIND_AES256_GCM => {
+      // CryptoContent: a big-endian u32 length, then that many bytes (9.5.2.4)
+      let len_bytes: [u8; 4] = buf
+        .get(..4)
+        .and_then(|b| b.try_into().ok())
+        .ok_or_else(|| security_error("Encoded payload has no CryptoContent length"))?;
+      let content_len = 4 + u32::from_be_bytes(len_bytes) as usize;
+      if buf.len() < content_len + foot_len {
+        return Err(security_error(
+          "Encoded payload is shorter than its CryptoContent and CryptoFooter",
+        ));
+      }
+      Ok((
+        &buf[..content_len],
+        &buf[content_len..content_len + foot_len],
+      ))
+    }
+    _ => Ok(buf.split_at(buf.len() - foot_len)),
+  }
+}
+
+#[cfg(test)]
+mod tests {
+  use super::*;
+
+  // An encrypted payload of a 5-byte sample (a std_msgs/Bool) as it arrives in a DATA
+  // submessage: CryptoContent (length + ciphertext), CryptoFooter, then the 3 padding
+  // bytes that align the submessage. The footer must be found after the content, not
+  // at the end of the buffer.
+  #[test]
+  fn an_encrypted_payload_padded_to_4_bytes_splits_at_its_content_length() {
+    let ciphertext = [0xc1, 0xc2, 0xc3, 0xc4, 0xc5];
+    let footer: Vec<u8> = (100..120).collect();
+    let mut buf = vec![0, 0, 0, 5];
+    buf.extend_from_slice(&ciphertext);
+    buf.extend_from_slice(&footer);
+    buf.extend_from_slice(&[0, 0, 0]); // submessage padding
+    assert_eq!(buf.len() % 4, 0);
+    let (content, foot) = split_content_and_footer(
+      &buf,
+      BuiltinCryptoTransformationKind::CRYPTO_TRANSFORMATION_KIND_AES256_GCM,
+      footer.len(),
+    )
+    .unwrap();
+    assert_eq!(content, &buf[..9]);
+    assert_eq!(foot, footer.as_slice());
+    // the published code took the footer from the end: 3 bytes off
+    let (_, from_end) = buf.split_at(buf.len() - footer.len());
+    assert_ne!(from_end, footer.as_slice());
+  }
+
+  #[test]
+  fn a_truncated_encrypted_payload_is_an_error_not_a_panic() {
+    let kind = BuiltinCryptoTransformationKind::CRYPTO_TRANSFORMATION_KIND_AES128_GCM;
+    assert!(split_content_and_footer(&[0, 0], kind, 20).is_err());
+    assert!(split_content_and_footer(&[0, 0, 0, 200, 1, 2, 3], kind, 20).is_err());
   }
 }
