@@ -69,6 +69,10 @@ enum BagCmd {
         /// Seconds to wait for subscribers to match before the first message.
         #[arg(long, default_value_t = 1.0)]
         wait: f64,
+        /// DDS Security enclave, used when ROS_SECURITY_ENABLE=true (with
+        /// ROS_SECURITY_KEYSTORE; see `tending security`).
+        #[arg(long, default_value = keystore::PLAYER_ENCLAVE)]
+        enclave: String,
     },
     /// Test helper: write a synthetic fleet episode (contract topics) as a bag; with
     /// --realtime it paces itself like a recorder and finalizes on SIGINT/SIGTERM.
@@ -97,6 +101,10 @@ pub struct RecordArgs {
     /// Seconds between topic discovery scans.
     #[arg(long, default_value_t = 0.5)]
     discovery_period: f64,
+    /// DDS Security enclave, used when ROS_SECURITY_ENABLE=true (with
+    /// ROS_SECURITY_KEYSTORE; see `tending security`).
+    #[arg(long, default_value = keystore::RECORDER_ENCLAVE)]
+    enclave: String,
 }
 
 pub fn run(a: BagArgs) -> Result<()> {
@@ -132,7 +140,8 @@ pub fn run(a: BagArgs) -> Result<()> {
             rate,
             domain_id,
             wait,
-        } => play(&bag, rate, domain_id, wait),
+            enclave,
+        } => play(&bag, rate, domain_id, wait, &enclave),
         BagCmd::Synth {
             dir,
             duration,

@@ -12,6 +12,7 @@ mod plot_pareto;
 mod records;
 mod render;
 mod report;
+mod security_cmd;
 mod sim_cmd;
 mod stats;
 mod train_cmd;
@@ -47,6 +48,8 @@ enum Cmd {
     Record(bag_cmd::RecordArgs),
     /// PNG figures of the experiments: eval bar charts, training curves (docs/experiments).
     Plot(plot_cmd::PlotArgs),
+    /// DDS Security keystores (SROS2 layout): create, add an enclave, revoke, list.
+    Security(security_cmd::SecurityArgs),
     /// Print the default scenario config (TOML) to start a custom one from.
     Config,
 }
@@ -62,6 +65,7 @@ fn main() -> std::process::ExitCode {
         Cmd::Bag(a) => bag_cmd::run(a),
         Cmd::Record(a) => bag_cmd::record(a),
         Cmd::Plot(a) => plot_cmd::run(a),
+        Cmd::Security(a) => security_cmd::run(a),
         Cmd::Config => {
             print!("{}", sim::ScenarioConfig::default().to_toml());
             Ok(())

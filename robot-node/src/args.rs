@@ -30,6 +30,8 @@ pub struct Params {
     pub namespace: String,
     pub node_name: String,
     pub domain_id: u16,
+    /// `--enclave`: the DDS Security enclave, used when `ROS_SECURITY_ENABLE=true`.
+    pub enclave: Option<String>,
     /// Checkpoint of the learned policy; `None` = scripted greedy controller.
     pub policy: Option<PathBuf>,
     /// `greedy`, `greedy-orca` or `policy`; default: `policy` if a policy path is given,
@@ -104,6 +106,7 @@ impl Default for Params {
             namespace: "/".into(),
             node_name: DEFAULT_NODE_NAME.into(),
             domain_id: 0,
+            enclave: None,
             policy: None,
             controller: ControllerKind::Greedy,
             shield: false,
@@ -173,6 +176,7 @@ where
         namespace: ra.namespace,
         node_name: ra.node_name,
         domain_id: ra.domain_id,
+        enclave: ra.enclave,
         log_level: ra.log_level,
         enable_rosout: ra.enable_rosout,
         ..Params::default()

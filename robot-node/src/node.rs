@@ -140,7 +140,7 @@ pub fn run_watched(p: &Params, stop: &AtomicBool, wd: &Watchdog) -> anyhow::Resu
         wd.beat(); // start-up progress
     }
     wd.stage(NodeStage::Context);
-    let ctx = ros::context(p.domain_id)?;
+    let ctx = ros::context(p.domain_id, p.enclave.as_deref())?;
     if multi {
         info!(
             "{} robots in one process: one reader per topic, shared",

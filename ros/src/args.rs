@@ -26,6 +26,8 @@ pub struct RosArgs {
     /// `--log-level`, if given (tracing filter directive).
     pub log_level: Option<String>,
     pub enable_rosout: bool,
+    /// `--enclave`, if given: the DDS Security enclave (see [`crate::security`]).
+    pub enclave: Option<String>,
     /// (name, value, origin) in application order: params files, then `-p`.
     pub values: Vec<(String, ParamValue, String)>,
 }
@@ -174,9 +176,7 @@ where
                             msg: "expected debug, info, warn, error or fatal".into(),
                         })?);
                 }
-                "-e" | "--enclave" => {
-                    next(&mut i, a)?;
-                }
+                "-e" | "--enclave" => p.enclave = Some(next(&mut i, a)?),
                 "--enable-rosout-logs" => p.enable_rosout = true,
                 "--disable-rosout-logs" => p.enable_rosout = false,
                 "--enable-stdout-logs"

@@ -7,7 +7,8 @@
 //! - [`pubsub`]: typed subscriptions and publishers with the contract's QoS profiles, and
 //!   [`StampedWriter`] (samples stamped with the simulator step);
 //! - [`process`]: the stop flag set by SIGINT/SIGTERM, tracing set-up;
-//! - [`watchdog`]: the start-up/stall watchdog.
+//! - [`watchdog`]: the start-up/stall watchdog;
+//! - [`security`]: DDS Security from `ROS_SECURITY_*` and `--enclave` (SROS2 enclaves).
 //!
 //! The wire contract itself (message types, topic names, QoS profiles, schemas) is `msgs`.
 
@@ -15,10 +16,12 @@ pub mod args;
 pub mod node;
 pub mod process;
 pub mod pubsub;
+pub mod security;
 pub mod watchdog;
 
-pub use node::{context, dds_err, NodeSpec, RosNode};
+pub use node::{context, context_with, dds_err, NodeSpec, RosNode};
 pub use process::{init_tracing, stop_flag};
 pub use pubsub::{
     publisher, publisher_qos, stamp_key_info, subscription, subscription_qos, StampedWriter,
 };
+pub use security::Security;

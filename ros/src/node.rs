@@ -11,16 +11,40 @@ use anyhow::Result;
 use ros2_client::dds::{Context, ContextOptions, Node};
 use ros2_client::{NodeName, NodeOptions};
 
+use crate::security::{self, Security, SecurityEnv};
+
 /// Map a ros2-client or RustDDS error (they implement `Debug` only) to an error naming
 /// what failed.
 pub fn dds_err<E: Debug>(what: &str) -> impl FnOnce(E) -> anyhow::Error + '_ {
     move |e| anyhow::anyhow!("{what}: {e:?}")
 }
 
-/// A DDS context (participant) on ROS domain `domain_id`.
-pub fn context(domain_id: u16) -> Result<Context> {
-    Context::with_options(ContextOptions::new().domain_id(domain_id))
-        .map_err(dds_err("DDS context"))
+/// A DDS context (participant) on ROS domain `domain_id`, secured as the ROS security
+/// environment says (`ROS_SECURITY_*`, with `enclave` from `--enclave`; see
+/// [`crate::security`]). With Enforce and no valid enclave this is the error that stops
+/// the process.
+pub fn context(domain_id: u16, enclave: Option<&str>) -> Result<Context> {
+    let sec = security::resolve(&SecurityEnv::from_env(), enclave, crate::process::report)?;
+    context_with(domain_id, &sec)
+}
+
+/// A DDS context on `domain_id` with `security` decided by the caller.
+pub fn context_with(domain_id: u16, security: &Security) -> Result<Context> {
+    let opts = ContextOptions::new().domain_id(domain_id);
+    match security {
+        Security::Off => Context::with_options(opts).map_err(dds_err("DDS context")),
+        Security::Enclave { enclave, dir } => {
+            // Our keys are not password-protected (as SROS2's); the files are the
+            // rmw_dds_common names, which ros2-client's security option reads.
+            let opts = opts.enable_security(dir, String::new());
+            Context::with_options(opts).map_err(|e| {
+                anyhow::anyhow!(
+                    "DDS Security refused enclave `{enclave}` ({}): {e:?}; refusing to start",
+                    dir.display()
+                )
+            })
+        }
+    }
 }
 
 /// The identity of a node: namespace (`/` or `/robot_3`), name, and whether it logs to

@@ -98,7 +98,7 @@ pub fn run_watched(
     wd.stage(NodeStage::Core);
     let mut core = Core::new(p.clone(), 0.0)?;
     wd.stage(NodeStage::Context);
-    let ctx = ros::context(p.domain_id)?;
+    let ctx = ros::context(p.domain_id, p.enclave.as_deref())?;
     wd.stage(NodeStage::Node);
     let spec = NodeSpec {
         namespace: &p.namespace,

@@ -37,6 +37,8 @@ pub struct BridgeParams {
     pub namespace: String,
     pub node_name: String,
     pub domain_id: u16,
+    /// `--enclave`: the DDS Security enclave, used when `ROS_SECURITY_ENABLE=true`.
+    pub enclave: Option<String>,
     pub log_level: Option<String>,
     pub enable_rosout: bool,
     pub setup: Setup,
@@ -80,6 +82,7 @@ impl Default for BridgeParams {
             namespace: "/".into(),
             node_name: DEFAULT_NODE_NAME.into(),
             domain_id: 0,
+            enclave: None,
             log_level: None,
             enable_rosout: true,
             setup: Setup::new(6, 4, 2),
@@ -127,6 +130,7 @@ where
         namespace: ra.namespace,
         node_name: ra.node_name,
         domain_id: ra.domain_id,
+        enclave: ra.enclave,
         log_level: ra.log_level,
         enable_rosout: ra.enable_rosout,
         ..BridgeParams::default()

@@ -7,7 +7,7 @@
 
 mod lockstep_common;
 
-use lockstep_common::{assert_same, fleet_lockstep, Offline};
+use lockstep_common::{assert_same, fleet_lockstep, fleet_lockstep_in, Offline};
 use std::path::PathBuf;
 
 use sim::{Env, ScenarioConfig, Setup};
@@ -112,4 +112,39 @@ fn paper_policy_fleet_in_lockstep_reproduces_the_offline_episode() {
         &["orca_filter:=false"],
     );
     assert_same("policy", &off, &m, steps);
+}
+
+/// The same episode with DDS Security on (every process in its own enclave, Enforce):
+/// authentication, access control and encryption change nothing the fleet computes.
+#[test]
+fn secure_policy_fleet_in_lockstep_reproduces_the_offline_episode() {
+    let path = PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .join("../policy/pretrained/smappo_moves_6.4_2.safetensors");
+    assert!(
+        path.exists(),
+        "the bundled checkpoint {} is missing",
+        path.display()
+    );
+    let setup = Setup::new(6, 4, 2);
+    let (seed, steps) = (0, 200);
+    let off = offline_policy(setup, seed, steps, &path);
+    let env0 = Env::new(ScenarioConfig::default(), setup, seed).unwrap();
+    let root = std::env::temp_dir().join(format!("tending-lockstep-ks-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&root);
+    let ks = keystore::Keystore::create(&root).unwrap();
+    let robots: Vec<String> = (0..setup.robots).map(|i| format!("robot_{i}")).collect();
+    ks.create_fleet_enclaves(&robots, keystore::Validity::days_from_now(1))
+        .unwrap();
+    let m = fleet_lockstep_in(
+        setup,
+        seed,
+        steps,
+        domain(2),
+        &env0,
+        Some(&path),
+        &["orca_filter:=false"],
+        Some(&root),
+    );
+    assert_same("secure policy", &off, &m, steps);
+    std::fs::remove_dir_all(root).unwrap();
 }

@@ -40,11 +40,12 @@ pub(super) fn play(
     rate: f64,
     domain_id: Option<u16>,
     wait: f64,
+    enclave: &str,
 ) -> Result<()> {
     anyhow::ensure!(rate > 0.0, "--rate must be positive");
     let r = BagReader::open(path)?;
     let stop = ros::stop_flag()?;
-    let mut ros = ros_node(domain(domain_id), "tending_play")?;
+    let mut ros = ros_node(domain(domain_id), "tending_play", enclave)?;
     let mut pubs: Vec<Option<SendFn>> = Vec::new();
     for t in &r.topics {
         let qos = if t.qos_yaml.is_empty() {

@@ -9,13 +9,17 @@ pub(super) fn domain(d: Option<u16>) -> u16 {
 }
 
 /// The CLI's own node (no rosout), spinning so that topic discovery works.
-pub(super) fn ros_node(domain_id: u16, name: &str) -> Result<ros::RosNode> {
+pub(super) fn ros_node(domain_id: u16, name: &str, enclave: &str) -> Result<ros::RosNode> {
     let spec = ros::NodeSpec {
         namespace: "/",
         name,
         enable_rosout: false,
     };
-    ros::RosNode::start(&ros::context(domain_id)?, &spec, "ros2-spinner")
+    ros::RosNode::start(
+        &ros::context(domain_id, Some(enclave))?,
+        &spec,
+        "ros2-spinner",
+    )
 }
 
 pub(super) type Drain = Box<dyn FnMut(&mut BagWriter) -> Result<usize>>;
@@ -79,7 +83,7 @@ pub(super) fn recorder_for(
 
 pub fn record(a: RecordArgs) -> Result<()> {
     let stop = ros::stop_flag()?;
-    let mut ros = ros_node(domain(a.domain_id), "tending_record")?;
+    let mut ros = ros_node(domain(a.domain_id), "tending_record", &a.enclave)?;
     let mut w = BagWriter::create(&a.dir)?;
     let start = Instant::now();
     let deadline = a

@@ -23,6 +23,7 @@ mod health;
 mod layout;
 mod live;
 mod plan;
+mod secure;
 
 use std::collections::BTreeMap;
 use std::io::BufRead;
@@ -87,6 +88,16 @@ pub struct FleetArgs {
     /// Do not read commands from stdin.
     #[arg(long)]
     pub no_stdin: bool,
+    /// DDS Security, the SROS2 way: every process authenticates with its own enclave
+    /// (a robot may publish only its own cmd_vel), traffic is encrypted, and
+    /// ROS_SECURITY_STRATEGY=Enforce (a process without a valid enclave does not start).
+    /// The keystore is --keystore, else a new one in the log directory.
+    #[arg(long)]
+    pub secure: bool,
+    /// Keystore for --secure (`tending security create`); created if it does not exist,
+    /// and missing enclaves are added (needs its private/ca.key.pem).
+    #[arg(long, requires = "secure")]
+    pub keystore: Option<PathBuf>,
 }
 
 /// A robot process (or the bridge) is given this long to start before its robots count in
@@ -164,6 +175,12 @@ impl Fleet {
             plan.controller(),
             plan.log_dir.display()
         );
+        if let Some(ks) = &plan.keystore {
+            eprintln!(
+                "fleet: DDS Security enforced, one enclave per process, keystore {}",
+                ks.root().display()
+            );
+        }
         let commands = stdin_lines(!plan.a.no_stdin);
         // lockstep ends when the bridge reaches max_steps; allow generous wall time for it
         let wall_limit = if plan.lockstep {

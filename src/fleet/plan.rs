@@ -69,6 +69,8 @@ pub(super) struct Plan {
     pub(super) node_bin: PathBuf,
     pub(super) bridge_bin: PathBuf,
     pub(super) per_process: usize,
+    /// `--secure`: the keystore every child's enclave is in.
+    pub(super) keystore: Option<keystore::Keystore>,
 }
 
 impl Plan {
@@ -116,6 +118,15 @@ impl Plan {
             .with_context(|| format!("creating log directory {}", log_dir.display()))?;
         let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
         let per_process = layout::robots_per_process(setup.robots, cores, a.robots_per_process);
+        let keystore = if a.secure {
+            let root = a
+                .keystore
+                .clone()
+                .unwrap_or_else(|| log_dir.join("keystore"));
+            Some(super::secure::keystore(&root)?)
+        } else {
+            None
+        };
         Ok(Plan {
             lockstep: a.mode == "lockstep",
             a,
@@ -127,6 +138,7 @@ impl Plan {
             node_bin,
             bridge_bin,
             per_process,
+            keystore,
         })
     }
 
@@ -202,6 +214,10 @@ impl Plan {
         for rp in &self.a.robot_params {
             c.args(["-p", rp]);
         }
+        if let Some(ks) = &self.keystore {
+            let enclave = super::secure::robots_enclave(ks, robots)?;
+            super::secure::env(&mut c, ks, &enclave);
+        }
         let child = c
             .spawn()
             .with_context(|| format!("starting {}", self.node_bin.display()))?;
@@ -241,6 +257,9 @@ impl Plan {
         if self.lockstep {
             let steps = (a.duration * a.rate_hz).round().max(1.0) as u64;
             b.args(["-p", &format!("max_steps:={steps}")]);
+        }
+        if let Some(ks) = &self.keystore {
+            super::secure::env(&mut b, ks, keystore::BRIDGE_ENCLAVE);
         }
         let mut child = b
             .spawn()

@@ -30,7 +30,7 @@ const PONG: &str = "/bench/pong";
 
 /// A node nobody spins: the benchmark needs no graph events, only its endpoints.
 fn node(domain: u16, name: &str) -> Result<(Context, Node)> {
-    let ctx = ros::context(domain)?;
+    let ctx = ros::context(domain, None)?;
     let spec = ros::NodeSpec {
         namespace: "/",
         name,

@@ -66,6 +66,32 @@ pub fn fleet_lockstep(
     policy: Option<&std::path::Path>,
     extra: &[&str],
 ) -> serde_json::Value {
+    fleet_lockstep_in(setup, seed, steps, domain, env0, policy, extra, None)
+}
+
+/// The ROS 2 security environment of a process in enclave `enclave` of `keystore`
+/// (Enforce: a process that cannot join securely does not start).
+fn secure(cmd: &mut Command, keystore: &std::path::Path, enclave: &str) {
+    cmd.env("ROS_SECURITY_KEYSTORE", keystore)
+        .env("ROS_SECURITY_ENABLE", "true")
+        .env("ROS_SECURITY_STRATEGY", "Enforce")
+        .env_remove("ROS_SECURITY_ENCLAVE_OVERRIDE")
+        .args(["--enclave", enclave]);
+}
+
+/// [`fleet_lockstep`], with DDS Security when `keystore` is given (enclaves
+/// `/tending/robot_<i>` and `/tending/sim_bridge`, as `tending security create` makes).
+#[allow(clippy::too_many_arguments)]
+pub fn fleet_lockstep_in(
+    setup: Setup,
+    seed: u64,
+    steps: u32,
+    domain: u16,
+    env0: &Env,
+    policy: Option<&std::path::Path>,
+    extra: &[&str],
+    keystore: Option<&std::path::Path>,
+) -> serde_json::Value {
     let s = env0.sizes();
     let f = |x: f32| format!("{:?}", x as f64);
     let mut kids = Kill(Vec::new());
@@ -89,9 +115,13 @@ pub fn fleet_lockstep(
         for e in extra {
             cmd.args(["-p", e]);
         }
+        if let Some(ks) = keystore {
+            secure(&mut cmd, ks, &format!("/tending/robot_{i}"));
+        }
         kids.0.push(cmd.spawn().unwrap());
     }
-    let mut bridge = Command::new(env!("CARGO_BIN_EXE_sim_bridge"))
+    let mut bridge = Command::new(env!("CARGO_BIN_EXE_sim_bridge"));
+    bridge
         .env("ROS_DOMAIN_ID", domain.to_string())
         .args(["--ros-args", "-p", &format!("setup:={setup}")])
         .args(["-p", &format!("seed:={seed}"), "-p", "mode:=lockstep"])
@@ -99,9 +129,13 @@ pub fn fleet_lockstep(
         .args(["-p", "settle_s:=2.0", "-p", "lockstep_timeout_s:=3.0"])
         .args(["-p", "stale_timeout_s:=10.0", "--disable-rosout-logs"])
         .stdout(Stdio::piped())
-        .stderr(Stdio::null())
-        .spawn()
-        .unwrap();
+        .stderr(Stdio::null());
+    if let Some(ks) = keystore {
+        // Authentication and key exchange between every pair of participants come first.
+        bridge.args(["-p", "settle_s:=8.0"]);
+        secure(&mut bridge, ks, "/tending/sim_bridge");
+    }
+    let mut bridge = bridge.spawn().unwrap();
     let out = bridge.stdout.take().unwrap();
     let (tx, rx) = std::sync::mpsc::channel();
     std::thread::spawn(move || {

@@ -1,0 +1,280 @@
+//! DDS Security between Rust participants, in one process on a private domain: a keystore
+//! from the `keystore` crate, contexts from `ros::context_with`.
+//!
+//! - the bridge's enclave publishes a pose that a robot's enclave receives (encrypted);
+//! - a participant without security sees none of it, and its `cmd_vel` reaches nobody;
+//! - a robot's enclave cannot create a writer on another robot's `cmd_vel`;
+//! - a robot's stolen identity with permissions signed by another CA (its own) is
+//!   refused by the bridge: its `cmd_vel` reaches nobody;
+//! - a tampered or expired permissions document stops the participant at start.
+
+use std::path::{Path, PathBuf};
+use std::time::{Duration, Instant};
+
+use keystore::{Keystore, Role, Validity};
+use msgs::{Bool, PoseStamped, Profile, Twist};
+use ros::{context_with, node::node, publisher, subscription, NodeSpec, Security};
+use ros2_client::dds::{Context, Node};
+
+/// A domain of its own per test binary run (other tests and fleets use low ids).
+fn domain(offset: u16) -> u16 {
+    201 + (std::process::id() % 8) as u16 * 4 + offset
+}
+
+fn keystore(name: &str) -> (PathBuf, Keystore) {
+    let root = std::env::temp_dir().join(format!("tending-sec-it-{name}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&root);
+    let ks = Keystore::create(&root).unwrap();
+    ks.create_fleet_enclaves(
+        &["robot_0".into(), "robot_1".into()],
+        Validity::days_from_now(1),
+    )
+    .unwrap();
+    (root, ks)
+}
+
+fn enclave(ks: &Keystore, name: &str) -> Security {
+    Security::Enclave {
+        enclave: name.into(),
+        dir: ks.enclave_dir(name),
+    }
+}
+
+fn participant(domain: u16, sec: &Security, name: &str) -> (Context, Node) {
+    let ctx = context_with(domain, sec).unwrap_or_else(|e| panic!("{name}: {e:#}"));
+    let spec = NodeSpec {
+        namespace: "/",
+        name,
+        enable_rosout: false,
+    };
+    let n = node(&ctx, &spec).unwrap();
+    (ctx, n)
+}
+
+fn pose(x: f64) -> PoseStamped {
+    let mut p = PoseStamped::default();
+    p.pose.position.x = x;
+    p
+}
+
+/// Publish with `send` every 50 ms for `secs`, counting what `recv` gets.
+fn pump(secs: f64, mut send: impl FnMut(), mut recv: impl FnMut() -> usize) -> usize {
+    let t0 = Instant::now();
+    let mut got = 0;
+    while t0.elapsed().as_secs_f64() < secs {
+        send();
+        std::thread::sleep(Duration::from_millis(50));
+        got += recv();
+    }
+    got
+}
+
+fn drain<M: serde::de::DeserializeOwned + 'static>(s: &ros2_client::Subscription<M>) -> usize {
+    let mut n = 0;
+    while let Ok(Some(_)) = s.take() {
+        n += 1;
+    }
+    n
+}
+
+#[test]
+fn enclaves_talk_and_a_participant_without_security_sees_and_moves_nothing() {
+    let (root, ks) = keystore("talk");
+    let d = domain(0);
+    let (_bc, mut bridge) = participant(d, &enclave(&ks, keystore::BRIDGE_ENCLAVE), "sim_bridge");
+    let (_rc, mut robot) = participant(d, &enclave(&ks, "/tending/robot_0"), "robot_node");
+    let (_sc, mut stranger) = participant(d, &Security::Off, "stranger");
+
+    let pose_pub =
+        publisher::<PoseStamped>(&mut bridge, "/robot_0/pose", Profile::RobotStream).unwrap();
+    let cmd_sub =
+        subscription::<Twist>(&mut bridge, "/robot_0/cmd_vel", Profile::RobotStream).unwrap();
+    let pose_sub =
+        subscription::<PoseStamped>(&mut robot, "/robot_0/pose", Profile::RobotStream).unwrap();
+    // A 5-byte sample: its encrypted payload is padded in the DATA submessage (the
+    // rustdds fix in docs/upstream/rustdds/0004-*).
+    let flag_pub =
+        publisher::<Bool>(&mut bridge, "/robot_0/has_part", Profile::RobotStream).unwrap();
+    let flag_sub =
+        subscription::<Bool>(&mut robot, "/robot_0/has_part", Profile::RobotStream).unwrap();
+    let mut flags_got = 0;
+    let cmd_pub = publisher::<Twist>(&mut robot, "/robot_0/cmd_vel", Profile::RobotStream).unwrap();
+    let spy =
+        subscription::<PoseStamped>(&mut stranger, "/robot_0/pose", Profile::RobotStream).unwrap();
+    let rogue =
+        publisher::<Twist>(&mut stranger, "/robot_0/cmd_vel", Profile::RobotStream).unwrap();
+    // Control: the stranger's reader works; it reads an unsecured participant's poses.
+    let (_oc, mut open) = participant(d, &Security::Off, "open");
+    let open_pub =
+        publisher::<PoseStamped>(&mut open, "/robot_9/pose", Profile::RobotStream).unwrap();
+    let open_spy =
+        subscription::<PoseStamped>(&mut stranger, "/robot_9/pose", Profile::RobotStream).unwrap();
+    let mut control = 0;
+
+    // Until the secure pair has matched (authentication, key exchange), then 1 s more.
+    let t0 = Instant::now();
+    let (mut robot_got, mut bridge_got, mut spy_got) = (0, 0, 0);
+    while t0.elapsed() < Duration::from_secs(15)
+        && (robot_got < 20 || bridge_got < 20 || flags_got < 20)
+    {
+        let _ = pose_pub.publish(pose(1.0));
+        let _ = flag_pub.publish(Bool { data: true });
+        let _ = cmd_pub.publish(Twist::planar(0.1, 0.0));
+        let _ = rogue.publish(Twist::planar(-9.0, 0.0));
+        let _ = open_pub.publish(pose(9.0));
+        std::thread::sleep(Duration::from_millis(50));
+        robot_got += drain(&pose_sub);
+        flags_got += drain(&flag_sub);
+        control += drain(&open_spy);
+        spy_got += drain(&spy);
+        // the bridge counts commands; a rogue one would show as -9
+        while let Ok(Some((m, _))) = cmd_sub.take() {
+            assert!(
+                m.linear.x > 0.0,
+                "the stranger's cmd_vel reached the bridge: {m:?}"
+            );
+            bridge_got += 1;
+        }
+    }
+    assert!(
+        robot_got >= 20,
+        "robot_0 got {robot_got} poses from the bridge in 15 s"
+    );
+    assert!(
+        bridge_got >= 20,
+        "the bridge got {bridge_got} commands from robot_0 in 15 s"
+    );
+    assert!(
+        flags_got >= 20,
+        "robot_0 got {flags_got} has_part flags in 15 s"
+    );
+    assert!(
+        control > 0,
+        "control: the stranger read no unsecured poses either"
+    );
+    assert_eq!(spy_got, 0, "a participant without security read poses");
+    eprintln!(
+        "robot_0 {robot_got} poses, bridge {bridge_got} commands, stranger 0 (control {control})"
+    );
+    std::fs::remove_dir_all(root).unwrap();
+}
+
+#[test]
+fn a_robot_enclave_cannot_write_another_robots_cmd_vel() {
+    let (root, ks) = keystore("cross");
+    let d = domain(1);
+    let (_rc, mut robot) = participant(d, &enclave(&ks, "/tending/robot_0"), "robot_node");
+    assert!(publisher::<Twist>(&mut robot, "/robot_0/cmd_vel", Profile::RobotStream).is_ok());
+    let e = publisher::<Twist>(&mut robot, "/robot_1/cmd_vel", Profile::RobotStream)
+        .err()
+        .expect("robot_0's enclave created a writer on /robot_1/cmd_vel");
+    let msg = format!("{e:#}");
+    eprintln!("refused: {msg}");
+    assert!(msg.contains("security"), "{msg}");
+    std::fs::remove_dir_all(root).unwrap();
+}
+
+/// robot_0's identity (cert and key) in the hands of someone who signs their own
+/// permissions, allowing /robot_1/cmd_vel, with their own CA, and trusts that CA locally:
+/// everything verifies on their side, but the bridge checks the permissions against the
+/// fleet's CA and refuses them, so their commands reach nobody.
+#[test]
+fn a_stolen_identity_with_self_signed_permissions_is_refused_by_the_bridge() {
+    let (root, ks) = keystore("stolen");
+    let (root2, attacker) = keystore("attacker");
+    let forged = attacker
+        .create_enclave(
+            "/tending/robot_0",
+            &Role::Robots(vec!["robot_0".into(), "robot_1".into()]),
+            Validity::days_from_now(1),
+        )
+        .unwrap();
+    let real = ks.enclave_dir("/tending/robot_0");
+    for f in ["cert.pem", "key.pem", "identity_ca.cert.pem"] {
+        std::fs::copy(real.join(f), forged.join(f)).unwrap();
+    }
+    let d = domain(2);
+    let (_bc, mut bridge) = participant(d, &enclave(&ks, keystore::BRIDGE_ENCLAVE), "sim_bridge");
+    let (_rc, mut robot1) = participant(d, &enclave(&ks, "/tending/robot_1"), "robot_node");
+    let forged_sec = Security::Enclave {
+        enclave: "/tending/robot_0".into(),
+        dir: forged.clone(),
+    };
+    let (_ac, mut thief) = participant(d, &forged_sec, "robot_node");
+
+    let cmd_sub =
+        subscription::<Twist>(&mut bridge, "/robot_1/cmd_vel", Profile::RobotStream).unwrap();
+    let real_pub =
+        publisher::<Twist>(&mut robot1, "/robot_1/cmd_vel", Profile::RobotStream).unwrap();
+    let rogue = publisher::<Twist>(&mut thief, "/robot_1/cmd_vel", Profile::RobotStream)
+        .expect("the thief's own (forged) permissions allow /robot_1/cmd_vel locally");
+    let mut real_got = 0;
+    let t0 = Instant::now();
+    while t0.elapsed() < Duration::from_secs(15) && real_got < 20 {
+        let _ = real_pub.publish(Twist::planar(0.1, 0.0));
+        let _ = rogue.publish(Twist::planar(-9.0, 0.0));
+        std::thread::sleep(Duration::from_millis(50));
+        while let Ok(Some((m, _))) = cmd_sub.take() {
+            assert!(
+                m.linear.x > 0.0,
+                "the forged robot_0 commanded robot_1: {m:?}"
+            );
+            real_got += 1;
+        }
+    }
+    assert!(
+        real_got >= 20,
+        "the bridge got {real_got} of robot_1's own commands"
+    );
+    // and a second more of rogue commands alone
+    let got = pump(
+        1.0,
+        || {
+            let _ = rogue.publish(Twist::planar(-9.0, 0.0));
+        },
+        || drain(&cmd_sub),
+    );
+    assert_eq!(got, 0, "the forged robot_0 commanded robot_1");
+    std::fs::remove_dir_all(root).unwrap();
+    std::fs::remove_dir_all(root2).unwrap();
+}
+
+fn refused(dir: &Path, name: &str) -> String {
+    let sec = Security::Enclave {
+        enclave: name.into(),
+        dir: dir.to_path_buf(),
+    };
+    match context_with(domain(3), &sec) {
+        Ok(_) => panic!("enclave {} was accepted", dir.display()),
+        Err(e) => format!("{e:#}"),
+    }
+}
+
+#[test]
+fn tampered_or_expired_permissions_stop_the_participant_at_start() {
+    let (root, ks) = keystore("tamper");
+    let dir = ks.enclave_dir("/tending/robot_0");
+    let p7s = std::fs::read_to_string(dir.join("permissions.p7s")).unwrap();
+    let tampered = p7s.replace("rt/robot_0/cmd_vel", "rt/robot_*/cmd_vel");
+    assert_ne!(p7s, tampered);
+    std::fs::write(dir.join("permissions.p7s"), tampered).unwrap();
+    let msg = refused(&dir, "/tending/robot_0");
+    eprintln!("tampered: {msg}");
+    assert!(msg.contains("refused enclave `/tending/robot_0`"), "{msg}");
+
+    let past = Validity {
+        not_before: time::OffsetDateTime::now_utc() - time::Duration::days(10),
+        not_after: time::OffsetDateTime::now_utc() - time::Duration::days(1),
+    };
+    let old = ks
+        .create_enclave(
+            "/tending/robot_1",
+            &Role::Robots(vec!["robot_1".into()]),
+            past,
+        )
+        .unwrap();
+    let msg = refused(&old, "/tending/robot_1");
+    eprintln!("expired: {msg}");
+    assert!(msg.contains("refused enclave `/tending/robot_1`"), "{msg}");
+    std::fs::remove_dir_all(root).unwrap();
+}
