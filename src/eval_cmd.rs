@@ -61,9 +61,12 @@ pub fn run(a: EvalArgs) -> Result<()> {
             let pol = Policy::load(p).with_context(|| format!("load {}", p.display()))?;
             let orca_filter =
                 a.orca_filter || (pol.trained_with_orca_filter() && !a.shield && !a.no_orca_filter);
+            // A target-action policy says so: its rows must not read as the paper's policy.
+            let targets = pol.actor().arch.actions == policy::ActionSpace::Targets;
             let label = format!(
-                "{}{} ({})",
+                "{}{}{} ({})",
                 pol.kind(),
+                if targets { " targets" } else { "" },
                 if a.shield {
                     "+shield"
                 } else if orca_filter {

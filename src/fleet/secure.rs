@@ -1,5 +1,5 @@
 //! `tending fleet --secure`: the keystore, each process's enclave, and the ROS 2 security
-//! environment of the children (docs/adr/0012-dds-security.md).
+//! environment of the children (docs/adr/0013-dds-security.md).
 
 use std::path::Path;
 use std::process::Command;
