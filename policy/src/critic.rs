@@ -15,6 +15,7 @@ use crate::actor::{copy_obs, write_flat};
 use crate::config::{ArchConfig, ModelKind};
 use crate::encoder::{EncoderCache, SmappoEncoder};
 use crate::error::{check_len, PolicyError};
+use crate::factored_input::FactoredRows;
 use crate::head::{HeadCache, RecurrentHead};
 use crate::mlp_base::{MlpBase, MlpCache};
 use crate::nn::{
@@ -58,7 +59,6 @@ struct CriticCache {
     feat: Vec<f32>,
     mlp: MlpCache,
     flat: Vec<f32>,
-    input: Vec<f32>,
     head: HeadCache,
     d_feat: Vec<f32>,
     d_fc: Vec<f32>,
@@ -258,22 +258,28 @@ impl Critic {
                     });
                 }
                 write_flat(flat, &c.obs, &mut c.flat)?;
+                // Row r's input is [own ++ its env's n robots ++ zeros to max_robots]: the
+                // env block is shared by the env's n rows, so it is never copied per row
+                // (`factored_input`).
                 let fd = flat.dim();
-                let w = fd * (1 + max_robots);
-                let x = sized(&mut c.input, rows * w);
-                x.iter_mut().for_each(|v| *v = 0.0);
-                for r in 0..rows {
-                    let e0 = (r / n) * n;
-                    x[r * w..r * w + fd].copy_from_slice(&c.flat[r * fd..(r + 1) * fd]);
-                    x[r * w + fd..r * w + fd * (1 + n)]
-                        .copy_from_slice(&c.flat[e0 * fd..(e0 + n) * fd]);
-                }
-                mlp.forward(p, x, rows, &mut c.mlp);
+                mlp.forward_factored(p, Self::factored(&c.flat, fd, n), rows, &mut c.mlp);
                 c.mlp.out()
             }
         };
         self.head.forward(p, feat, t, b, h0, masks, &mut c.head);
         Ok(&c.head.y)
+    }
+
+    /// The MAPPO critic's rows over flat observations (`fd` floats per robot, envs of `n`
+    /// consecutive rows).
+    fn factored(flat: &[f32], fd: usize, n: usize) -> FactoredRows<'_> {
+        FactoredRows {
+            own: flat,
+            d_own: fd,
+            shared: flat,
+            d_sh: fd * n,
+            group: n,
+        }
     }
 
     /// Hidden state after the last step of the last forward (B x H).
@@ -358,10 +364,11 @@ impl Critic {
                 }
                 enc.backward(p, g, &c.obs, &mut c.enc, d_enc);
             }
-            CriticBase::Mappo { mlp, .. } => {
+            CriticBase::Mappo { mlp, flat, .. } => {
                 self.head
                     .backward(p, g, c.mlp.out(), t, b, &mut c.head, dvalues, d_feat);
-                mlp.backward(p, g, &c.input, &mut c.mlp, d_feat);
+                let x = Self::factored(&c.flat, flat.dim(), n);
+                mlp.backward_factored(p, g, x, &mut c.mlp, d_feat);
             }
         }
     }

@@ -13,6 +13,7 @@ pub mod config;
 pub mod critic;
 pub mod encoder;
 pub mod error;
+pub mod factored_input;
 pub mod head;
 pub mod inference;
 pub mod mlp_base;

@@ -15,18 +15,19 @@ pub struct MlpBase {
 
 #[derive(Debug, Clone, Default)]
 pub struct MlpCache {
-    n: usize,
+    pub(crate) n: usize,
     x0: Vec<f32>,
-    m0: Vec<f32>,
-    s0: Vec<f32>,
-    act: [Vec<f32>; 2],
+    pub(crate) m0: Vec<f32>,
+    pub(crate) s0: Vec<f32>,
+    pub(crate) act: [Vec<f32>; 2],
     m: [Vec<f32>; 2],
     s: [Vec<f32>; 2],
     ln_out: [Vec<f32>; 2],
-    d_a: Vec<f32>,
+    pub(crate) d_a: Vec<f32>,
     d_b: Vec<f32>,
     d_in: Vec<f32>,
     d_x: Vec<f32>,
+    pub(crate) fac: crate::factored_input::FactoredCache,
 }
 
 impl MlpCache {
@@ -77,23 +78,50 @@ impl MlpBase {
 
     /// x: n x d_in -> c.out(): n x hidden.
     pub fn forward(&self, p: &[f32], x: &[f32], n: usize, c: &mut MlpCache) {
-        let h = self.hidden;
         c.n = n;
         let x0 = sized(&mut c.x0, n * self.d_in);
         self.feat_ln
             .forward(p, x, n, x0, sized(&mut c.m0, n), sized(&mut c.s0, n));
+        let a = sized(&mut c.act[0], n * self.hidden);
+        self.fc[0].forward(p, &c.x0, n, a);
+        self.forward_tail(p, n, c);
+    }
+
+    /// From the first Linear's output (`c.act[0]`, pre-ReLU) to `c.out()`.
+    pub(crate) fn forward_tail(&self, p: &[f32], n: usize, c: &mut MlpCache) {
+        let h = self.hidden;
         for i in 0..2 {
-            let a = sized(&mut c.act[i], n * h);
-            let input: &[f32] = if i == 0 { &c.x0 } else { &c.ln_out[0] };
-            self.fc[i].forward(p, input, n, a);
-            relu::forward(a);
+            if i == 1 {
+                let a = sized(&mut c.act[1], n * h);
+                self.fc[1].forward(p, &c.ln_out[0], n, a);
+            }
+            relu::forward(&mut c.act[i]);
             let o = sized(&mut c.ln_out[i], n * h);
-            self.ln[i].forward(p, a, n, o, sized(&mut c.m[i], n), sized(&mut c.s[i], n));
+            self.ln[i].forward(
+                p,
+                &c.act[i],
+                n,
+                o,
+                sized(&mut c.m[i], n),
+                sized(&mut c.s[i], n),
+            );
         }
     }
 
     /// Backward; the input gradient is not needed (raw observations).
     pub fn backward(&self, p: &[f32], g: &mut [f32], x: &[f32], c: &mut MlpCache, dout: &[f32]) {
+        let n = c.n;
+        self.backward_tail(p, g, c, dout);
+        let dx0 = sized(&mut c.d_in, n * self.d_in);
+        self.fc[0].backward(p, g, &c.x0, &c.d_a, n, Some(dx0), false);
+        // feature norm (its gamma/beta are learnable; the input gradient is dropped)
+        let dx = sized(&mut c.d_x, n * self.d_in);
+        self.feat_ln.backward(p, g, x, &c.d_in, n, &c.m0, &c.s0, dx);
+    }
+
+    /// Backward from `dout` down to the first Linear's output: leaves dL/d`act[0]`
+    /// (after the ReLU) in `c.d_a`.
+    pub(crate) fn backward_tail(&self, p: &[f32], g: &mut [f32], c: &mut MlpCache, dout: &[f32]) {
         let (n, h) = (c.n, self.hidden);
         let da = sized(&mut c.d_a, n * h);
         let db = sized(&mut c.d_b, n * h);
@@ -101,13 +129,8 @@ impl MlpBase {
         self.ln[1].backward(p, g, &c.act[1], dout, n, &c.m[1], &c.s[1], da);
         relu::backward(&c.act[1], da);
         self.fc[1].backward(p, g, &c.ln_out[0], da, n, Some(db), false);
-        // layer 1
+        // layer 1, down to the Linear's output
         self.ln[0].backward(p, g, &c.act[0], db, n, &c.m[0], &c.s[0], da);
         relu::backward(&c.act[0], da);
-        let dx0 = sized(&mut c.d_in, n * self.d_in);
-        self.fc[0].backward(p, g, &c.x0, da, n, Some(dx0), false);
-        // feature norm (its gamma/beta are learnable; the input gradient is dropped)
-        let dx = sized(&mut c.d_x, n * self.d_in);
-        self.feat_ln.backward(p, g, x, &c.d_in, n, &c.m0, &c.s0, dx);
     }
 }
