@@ -23,8 +23,9 @@ use bytes::Bytes;
 use x509_certificate::{
   certificate::CapturedX509Certificate, EcdsaCurve, KeyAlgorithm, SignatureAlgorithm,
 };
-use der::Decode;
+use der::{Decode, DecodePem, Encode};
 use bcder::{encode::Values, Mode};
+use x509_cert::{crl::CertificateList, time::Time};
 
 use crate::security::{
   authentication::authentication_builtin::types::{
@@ -41,6 +42,10 @@ use crate::security::{
 pub struct Certificate {
   cert: CapturedX509Certificate,
   subject_name: DistinguishedName,
+  // Kept for the validity-period and revocation checks (RFC 5280 6.1.3 (a)(2), (a)(3)).
+  serial_number: Vec<u8>,
+  not_before: Time,
+  not_after: Time,
 }
 
 impl Certificate {
@@ -51,9 +56,44 @@ impl Certificate {
     let other_cert = x509_cert::certificate::Certificate::from_der(cert.constructed_data())
       .map_err(to_config_error_parse("Cannot read X.509 Certificate(2)"))?;
 
-    let subject_name = other_cert.tbs_certificate().subject().clone().into();
+    let tbs = other_cert.tbs_certificate();
+    let subject_name = tbs.subject().clone().into();
+    let serial_number = tbs.serial_number().as_bytes().to_vec();
+    let validity = tbs.validity();
 
-    Ok(Certificate { cert, subject_name })
+    Ok(Certificate {
+      cert,
+      subject_name,
+      serial_number,
+      not_before: validity.not_before,
+      not_after: validity.not_after,
+    })
+  }
+
+  /// The serial number (the DER INTEGER's content bytes).
+  pub fn serial_number(&self) -> &[u8] {
+    &self.serial_number
+  }
+
+  /// Fails unless `now` is within the certificate's validity period
+  /// (notBefore <= now <= notAfter, RFC 5280 4.1.2.5). DDS Security v1.1 9.3.2.1
+  /// requires the identity certificate to be valid; an expired or not yet valid
+  /// certificate must not authenticate.
+  pub fn check_validity_period(&self, now: SystemTime) -> SecurityResult<()> {
+    let now_unix = now.duration_since(UNIX_EPOCH).unwrap_or_default();
+    if now_unix < self.not_before.to_unix_duration() {
+      Err(security_error(&format!(
+        "Certificate '{}' is not valid yet: its validity starts at {} (notBefore)",
+        self.subject_name, self.not_before
+      )))
+    } else if now_unix > self.not_after.to_unix_duration() {
+      Err(security_error(&format!(
+        "Certificate '{}' has expired: its validity ended at {} (notAfter)",
+        self.subject_name, self.not_after
+      )))
+    } else {
+      Ok(())
+    }
   }
 
   pub fn to_pem(&self) -> String {
@@ -184,7 +224,103 @@ impl From<x509_cert::name::Name> for DistinguishedName {
   }
 }
 
-use std::{fmt, str::FromStr};
+use std::{
+  fmt,
+  str::FromStr,
+  time::{SystemTime, UNIX_EPOCH},
+};
+
+// ecdsa-with-SHA256 (RFC 5758 3.2) and sha256WithRSAEncryption (RFC 4055 5): the
+// signature algorithms of the builtin PKI-DH plugin's certificates (Table 49).
+const OID_ECDSA_WITH_SHA256: &str = "1.2.840.10045.4.3.2";
+const OID_SHA256_WITH_RSA: &str = "1.2.840.113549.1.1.11";
+
+/// A certificate revocation list (X.509 CRL, RFC 5280 5) issued by the identity CA.
+///
+/// DDS Security v1.1 leaves revocation to the implementation (9.3.2.1: "should also
+/// check ... revoked"); Connext reads a CRL from the `dds.sec.auth.crl` participant
+/// property, Fast DDS from `dds.sec.auth.builtin.PKI-DH.identity_crl` (which ROS 2's
+/// rmw sets when an enclave holds `crl.pem`). This is that file, checked against the
+/// CA: a CRL that does not verify is a configuration error, not an empty list.
+#[derive(Clone, Debug)]
+pub struct RevocationList {
+  revoked: Vec<Vec<u8>>,
+}
+
+impl RevocationList {
+  /// Parse a PEM CRL and verify that `issuer` (the identity CA) signed it.
+  pub fn from_pem(pem_data: impl AsRef<[u8]>, issuer: &Certificate) -> Result<Self, ConfigError> {
+    let crl = CertificateList::<x509_cert::certificate::Rfc5280>::from_pem(pem_data.as_ref())
+      .map_err(to_config_error_parse("Cannot read X.509 CRL"))?;
+    let tbs = &crl.tbs_cert_list;
+    let crl_issuer = DistinguishedName::from(tbs.issuer.clone());
+    if !crl_issuer.matches(issuer.subject_name()) {
+      return Err(ConfigError::Security(format!(
+        "CRL is issued by '{crl_issuer}', not by the identity CA '{}'",
+        issuer.subject_name()
+      )));
+    }
+    let algorithm: &'static dyn ring::signature::VerificationAlgorithm =
+      match crl.signature_algorithm.oid.to_string().as_str() {
+        OID_ECDSA_WITH_SHA256 => &ring::signature::ECDSA_P256_SHA256_ASN1,
+        OID_SHA256_WITH_RSA => &ring::signature::RSA_PKCS1_2048_8192_SHA256,
+        other => {
+          return Err(ConfigError::Security(format!(
+            "CRL signature algorithm {other} is not supported (expected ECDSA or RSA with \
+             SHA-256)"
+          )))
+        }
+      };
+    // DER is canonical, so re-encoding the parsed TBSCertList gives the signed bytes.
+    let signed = tbs
+      .to_der()
+      .map_err(to_config_error_parse("Cannot encode the CRL's TBSCertList"))?;
+    let signature = crl
+      .signature
+      .as_bytes()
+      .ok_or_else(|| ConfigError::Parse("CRL signature is not a whole number of bytes".into()))?;
+    issuer
+      .verify_signed_data_with_algorithm(signed, signature, algorithm)
+      .map_err(|e| {
+        ConfigError::Security(format!("CRL is not signed by the identity CA: {}", e.msg))
+      })?;
+    if let Some(next) = tbs.next_update {
+      if SystemTime::now() > next.to_system_time() {
+        // Still applied: an old list of revoked certificates is better than none.
+        warn!("CRL's nextUpdate {next} has passed; using it anyway");
+      }
+    }
+    let revoked = tbs
+      .revoked_certificates
+      .iter()
+      .flatten()
+      .map(|r| r.serial_number.as_bytes().to_vec())
+      .collect();
+    Ok(RevocationList { revoked })
+  }
+
+  /// Fails if `cert` (issued by this list's CA) is revoked.
+  pub fn check_not_revoked(&self, cert: &Certificate) -> SecurityResult<()> {
+    if self.revoked.iter().any(|s| s == cert.serial_number()) {
+      Err(security_error(&format!(
+        "Certificate '{}' (serial {}) is revoked by the CRL",
+        cert.subject_name(),
+        hex(cert.serial_number())
+      )))
+    } else {
+      Ok(())
+    }
+  }
+
+  /// How many certificates the list revokes.
+  pub fn revoked_count(&self) -> usize {
+    self.revoked.len()
+  }
+}
+
+fn hex(bytes: &[u8]) -> String {
+  bytes.iter().map(|b| format!("{b:02x}")).collect()
+}
 
 impl fmt::Display for DistinguishedName {
   fn fmt(&self, f: &mut fmt::Formatter<'_>) -> Result<(), fmt::Error> {

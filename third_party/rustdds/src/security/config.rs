@@ -15,7 +15,7 @@ use super::{
     QOS_PERMISSIONS_DOCUMENT_PROPERTY_NAME,
   },
   authentication::authentication_builtin::types::{
-    QOS_IDENTITY_CA_PROPERTY_NAME, QOS_IDENTITY_CERTIFICATE_PROPERTY_NAME,
+    QOS_CRL_PROPERTY_NAME, QOS_IDENTITY_CA_PROPERTY_NAME, QOS_IDENTITY_CERTIFICATE_PROPERTY_NAME,
     QOS_PASSWORD_PROPERTY_NAME, QOS_PRIVATE_KEY_PROPERTY_NAME,
   },
 };
@@ -73,7 +73,9 @@ pub struct DomainParticipantSecurityConfigFiles {
   pub domain_governance_document: PathBuf,
   /// Access control rules for topics and participants.
   pub participant_permissions_document: PathBuf,
-  /// CRLs are not yet implemented.
+  /// The identity CA's certificate revocation list (PEM), if any: peers whose
+  /// identity certificate it lists are refused, and so is this participant if it
+  /// lists our own.
   pub certificate_revocation_list: Option<PathBuf>,
 }
 
@@ -97,7 +99,8 @@ impl DomainParticipantSecurityConfigFiles {
       permissions_ca_certificate: own_and_append(&d, "permissions_ca.cert.pem"),
       domain_governance_document: own_and_append(&d, "governance.p7s"),
       participant_permissions_document: own_and_append(&d, "permissions.p7s"),
-      certificate_revocation_list: None, // "crl.pem"
+      // optional in rmw_dds_common: used when the enclave has one
+      certificate_revocation_list: Some(own_and_append(&d, "crl.pem")).filter(|p| p.is_file()),
     }
   }
 
@@ -122,7 +125,8 @@ impl DomainParticipantSecurityConfigFiles {
       permissions_ca_certificate: own_and_append(&d, "permissions_ca.cert.pem"),
       domain_governance_document: own_and_append(&d, "governance.p7s"),
       participant_permissions_document: own_and_append(&d, "permissions.p7s"),
-      certificate_revocation_list: None, // "crl.pem"
+      // optional in rmw_dds_common: used when the enclave has one
+      certificate_revocation_list: Some(own_and_append(&d, "crl.pem")).filter(|p| p.is_file()),
     }
   }
 
@@ -169,6 +173,9 @@ impl DomainParticipantSecurityConfigFiles {
         &self.participant_permissions_document,
       ),
     ];
+    if let Some(crl) = &self.certificate_revocation_list {
+      value.push(mk_file_prop(QOS_CRL_PROPERTY_NAME, crl));
+    }
     if let PrivateSigningKey::Files { file_password, .. } = self.participant_identity_private_key {
       value.push(mk_string_prop(QOS_PASSWORD_PROPERTY_NAME, file_password));
     }

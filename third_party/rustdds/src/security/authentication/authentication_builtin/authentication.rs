@@ -31,8 +31,9 @@ use super::{
   types::{
     parse_signature_algo_name_to_ring, BuiltinAuthenticatedPeerCredentialToken,
     BuiltinIdentityToken, DH_MODP_KAGREE_ALGO_NAME, ECDH_KAGREE_ALGO_NAME,
-    QOS_IDENTITY_CA_PROPERTY_NAME, QOS_IDENTITY_CERTIFICATE_PROPERTY_NAME,
-    QOS_PASSWORD_PROPERTY_NAME, QOS_PRIVATE_KEY_PROPERTY_NAME,
+    QOS_CRL_PROPERTY_NAME, QOS_CRL_PROPERTY_NAME_FASTDDS, QOS_IDENTITY_CA_PROPERTY_NAME,
+    QOS_IDENTITY_CERTIFICATE_PROPERTY_NAME, QOS_PASSWORD_PROPERTY_NAME,
+    QOS_PRIVATE_KEY_PROPERTY_NAME,
   },
   BuiltinHandshakeState, DHKeys, LocalParticipantInfo, RemoteParticipantInfo,
 };
@@ -77,6 +78,19 @@ fn validate_remote_guid(
       expected_guid_start
     ))
   }
+}
+
+// A remote identity certificate that verifies against the identity CA must also be
+// within its validity period and not revoked by the CA's revocation list (if we have
+// one). The CA's signature alone would accept an expired or revoked identity forever.
+fn check_remote_identity_status(
+  remote_identity_cert: &Certificate,
+  revocation_list: Option<&RevocationList>,
+) -> SecurityResult<()> {
+  remote_identity_cert
+    .check_validity_period(std::time::SystemTime::now())
+    .and_then(|()| revocation_list.map_or(Ok(()), |crl| crl.check_not_revoked(remote_identity_cert)))
+    .map_err(|e| create_security_error_and_log!("Refusing the remote participant: {}", e.msg))
 }
 
 impl Authentication for AuthenticationBuiltin {
@@ -134,16 +148,15 @@ impl Authentication for AuthenticationBuiltin {
           .map_err(|e| create_security_error_and_log!("{e:?}"))
       })?;
 
-    let identity_certificate = participant_qos
-      .get_property(QOS_IDENTITY_CERTIFICATE_PROPERTY_NAME)
-      .and_then(|certificate_uri| {
-        read_uri(&certificate_uri).map_err(|conf_err| {
-          create_security_error_and_log!(
-            "Failed to read the DomainParticipant identity certificate from {}: {:?}",
-            certificate_uri,
-            conf_err
-          )
-        })
+    let identity_certificate_uri =
+      participant_qos.get_property(QOS_IDENTITY_CERTIFICATE_PROPERTY_NAME)?;
+    let identity_certificate = read_uri(&identity_certificate_uri)
+      .map_err(|conf_err| {
+        create_security_error_and_log!(
+          "Failed to read the DomainParticipant identity certificate from {}: {:?}",
+          identity_certificate_uri,
+          conf_err
+        )
       })
       .and_then(|certificate_contents_pem| {
         Certificate::from_pem(certificate_contents_pem)
@@ -178,7 +191,47 @@ impl Authentication for AuthenticationBuiltin {
         )
       })?;
 
-    // TODO: Check (somehow) that my identity has not been revoked.
+    // An expired (or not yet valid) identity would be refused by every peer that
+    // checks; refuse to start with it, naming the file.
+    identity_certificate
+      .check_validity_period(std::time::SystemTime::now())
+      .map_err(|e| {
+        create_security_error_and_log!(
+          "My own identity certificate {} is unusable: {}",
+          identity_certificate_uri,
+          e.msg
+        )
+      })?;
+
+    // The identity CA's revocation list, if configured: it must verify against the
+    // CA, and must not revoke our own identity.
+    let revocation_list = match participant_qos
+      .get_optional_property(QOS_CRL_PROPERTY_NAME)
+      .or_else(|| participant_qos.get_optional_property(QOS_CRL_PROPERTY_NAME_FASTDDS))
+    {
+      None => None,
+      Some(crl_uri) => {
+        let crl = read_uri(&crl_uri)
+          .and_then(|pem| RevocationList::from_pem(pem, &identity_ca))
+          .map_err(|e| {
+            create_security_error_and_log!(
+              "Failed to read the certificate revocation list {}: {:?}",
+              crl_uri,
+              e
+            )
+          })?;
+        crl.check_not_revoked(&identity_certificate).map_err(|e| {
+          create_security_error_and_log!(
+            "My own identity certificate {} is unusable: {} {}",
+            identity_certificate_uri,
+            e.msg,
+            crl_uri
+          )
+        })?;
+        debug!("Certificate revocation list {crl_uri}: {} revoked", crl.revoked_count());
+        Some(crl)
+      }
+    };
 
     // Compute the new adjusted GUID. The start is computed from the hash of the
     // Subject Name in the identity certificate.
@@ -225,6 +278,7 @@ impl Authentication for AuthenticationBuiltin {
       identity_certificate,
       id_cert_private_key,
       identity_ca,
+      revocation_list,
       signed_permissions_document_xml: Bytes::new(), /* This is to filled in later by
                                                       * initialization calling
                                                       * .set_permissions_credential_and_token() */
@@ -534,6 +588,7 @@ impl Authentication for AuthenticationBuiltin {
 
     // Verify that 1's identity cert checks out against CA.
     cert1.verify_signed_by_certificate(&local_info.identity_ca)?;
+    check_remote_identity_status(&cert1, local_info.revocation_list.as_ref())?;
 
     // Verify that the remote GUID is as specified by the spec
     let remote_pdata =
@@ -724,6 +779,7 @@ impl Authentication for AuthenticationBuiltin {
 
         // Verify that 2's identity cert checks out against CA.
         cert2.verify_signed_by_certificate(&local_info.identity_ca)?;
+        check_remote_identity_status(&cert2, local_info.revocation_list.as_ref())?;
 
         // Verify that the remote GUID is as specified by the spec.
         // Note that spec does say that this check needs to be done here. But it seems

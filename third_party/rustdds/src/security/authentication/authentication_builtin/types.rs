@@ -17,6 +17,12 @@ pub(in crate::security) const QOS_IDENTITY_CERTIFICATE_PROPERTY_NAME: &str =
   "dds.sec.auth.identity_certificate";
 pub(in crate::security) const QOS_PRIVATE_KEY_PROPERTY_NAME: &str = "dds.sec.auth.private_key";
 pub(in crate::security) const QOS_PASSWORD_PROPERTY_NAME: &str = "dds.sec.auth.password";
+// Not in DDS Security v1.1: the identity CA's certificate revocation list (a PEM CRL), under
+// Connext's name; Fast DDS's name (what ROS 2's rmw_fastrtps sets from an enclave's
+// crl.pem) is read too.
+pub(in crate::security) const QOS_CRL_PROPERTY_NAME: &str = "dds.sec.auth.crl";
+pub(in crate::security) const QOS_CRL_PROPERTY_NAME_FASTDDS: &str =
+  "dds.sec.auth.builtin.PKI-DH.identity_crl";
 
 // Expected property names in IdentityToken
 pub(in crate::security) const CERT_SN_PROPERTY_NAME: &str = "dds.cert.sn";
