@@ -6,7 +6,12 @@
 //! - a robot's enclave cannot create a writer on another robot's `cmd_vel`;
 //! - a robot's stolen identity with permissions signed by another CA (its own) is
 //!   refused by the bridge: its `cmd_vel` reaches nobody;
-//! - a tampered or expired permissions document stops the participant at start.
+//! - a tampered permissions document, or an expired or revoked identity, stops the
+//!   participant at start (the error names the file);
+//! - an identity that expired after its participant started, or whose certificate was
+//!   revoked (and the thief deleted its copy of the CRL), is refused by the peers that
+//!   meet it: it reads nothing and its `cmd_vel` reaches nobody (the rustdds fix in
+//!   docs/upstream/rustdds/0004-*).
 
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
@@ -18,7 +23,7 @@ use ros2_client::dds::{Context, Node};
 
 /// A domain of its own per test binary run (other tests and fleets use low ids).
 fn domain(offset: u16) -> u16 {
-    201 + (std::process::id() % 8) as u16 * 4 + offset
+    201 + (std::process::id() % 4) as u16 * 8 + offset
 }
 
 fn keystore(name: &str) -> (PathBuf, Keystore) {
@@ -92,7 +97,7 @@ fn enclaves_talk_and_a_participant_without_security_sees_and_moves_nothing() {
     let pose_sub =
         subscription::<PoseStamped>(&mut robot, "/robot_0/pose", Profile::RobotStream).unwrap();
     // A 5-byte sample: its encrypted payload is padded in the DATA submessage (the
-    // rustdds fix in docs/upstream/rustdds/0004-*).
+    // rustdds fix in docs/upstream/rustdds/0003-*).
     let flag_pub =
         publisher::<Bool>(&mut bridge, "/robot_0/has_part", Profile::RobotStream).unwrap();
     let flag_sub =
@@ -276,5 +281,106 @@ fn tampered_or_expired_permissions_stop_the_participant_at_start() {
     let msg = refused(&old, "/tending/robot_1");
     eprintln!("expired: {msg}");
     assert!(msg.contains("refused enclave `/tending/robot_1`"), "{msg}");
+    // The identity is checked first, and the error names the certificate file.
+    assert!(
+        msg.contains(&format!("{}", old.join("cert.pem").display())) && msg.contains("expired"),
+        "{msg}"
+    );
+    std::fs::remove_dir_all(root).unwrap();
+}
+
+/// The bridge (enclave `/tending/sim_bridge`) and robot_0 meet `suspect` on a fresh
+/// domain; robot_0 is the control (it must be matched and exchange data). Returns what
+/// the suspect read of robot_1's poses and how many of its commands reached the bridge.
+fn bridge_meets(d: u16, ks: &Keystore, suspect: &mut Node) -> (usize, usize) {
+    let (_bc, mut bridge) = participant(d, &enclave(ks, keystore::BRIDGE_ENCLAVE), "sim_bridge");
+    let (_rc, mut robot0) = participant(d, &enclave(ks, "/tending/robot_0"), "robot_node");
+    let pose_pub =
+        publisher::<PoseStamped>(&mut bridge, "/robot_1/pose", Profile::RobotStream).unwrap();
+    let cmd0 =
+        subscription::<Twist>(&mut bridge, "/robot_0/cmd_vel", Profile::RobotStream).unwrap();
+    let cmd1 =
+        subscription::<Twist>(&mut bridge, "/robot_1/cmd_vel", Profile::RobotStream).unwrap();
+    let real_pub =
+        publisher::<Twist>(&mut robot0, "/robot_0/cmd_vel", Profile::RobotStream).unwrap();
+    let spy = subscription::<PoseStamped>(suspect, "/robot_1/pose", Profile::RobotStream).unwrap();
+    let rogue = publisher::<Twist>(suspect, "/robot_1/cmd_vel", Profile::RobotStream)
+        .expect("the suspect's own permissions allow /robot_1/cmd_vel locally");
+    let (mut control, mut spied, mut commanded) = (0, 0, 0);
+    let t0 = Instant::now();
+    // Until the control pair has matched, then 2 s more.
+    let mut matched_at = None;
+    while t0.elapsed() < Duration::from_secs(20)
+        && matched_at.is_none_or(|t: Instant| t.elapsed() < Duration::from_secs(2))
+    {
+        let _ = pose_pub.publish(pose(1.0));
+        let _ = real_pub.publish(Twist::planar(0.1, 0.0));
+        let _ = rogue.publish(Twist::planar(-9.0, 0.0));
+        std::thread::sleep(Duration::from_millis(50));
+        control += drain(&cmd0);
+        spied += drain(&spy);
+        commanded += drain(&cmd1);
+        if control >= 20 && matched_at.is_none() {
+            matched_at = Some(Instant::now());
+        }
+    }
+    assert!(
+        control >= 20,
+        "control: the bridge got {control} of robot_0's commands in 20 s"
+    );
+    eprintln!("control {control} commands; suspect read {spied}, commanded {commanded}");
+    (spied, commanded)
+}
+
+/// robot_1's identity expires 3 s after its participant started (its permissions stay
+/// valid, so only the identity's dates can refuse it). Its own start-up check passed;
+/// the bridge, meeting it after the expiry, must refuse it.
+#[test]
+fn an_identity_that_expired_after_start_is_refused_by_peers_that_meet_it_later() {
+    let (root, ks) = keystore("expiring");
+    let dir = ks.enclave_dir("/tending/robot_1");
+    let permissions = std::fs::read(dir.join("permissions.p7s")).unwrap();
+    let now = time::OffsetDateTime::now_utc();
+    let soon = Validity {
+        not_before: now - time::Duration::hours(1),
+        not_after: now + time::Duration::seconds(3),
+    };
+    ks.create_enclave(
+        "/tending/robot_1",
+        &Role::Robots(vec!["robot_1".into()]),
+        soon,
+    )
+    .unwrap();
+    std::fs::write(dir.join("permissions.p7s"), permissions).unwrap();
+    let d = domain(4);
+    let (_sc, mut suspect) = participant(d, &enclave(&ks, "/tending/robot_1"), "robot_node");
+    // past notAfter (whole seconds in the certificate) with a margin
+    std::thread::sleep(Duration::from_secs(5));
+    let (spied, commanded) = bridge_meets(d, &ks, &mut suspect);
+    assert_eq!(spied, 0, "an expired identity read robot_1's poses");
+    assert_eq!(commanded, 0, "an expired identity commanded robot_1");
+    std::fs::remove_dir_all(root).unwrap();
+}
+
+/// `tending security revoke /tending/robot_1` puts robot_1's certificate on the CRL
+/// every enclave holds: robot_1 refuses to start with it, naming both files; with its
+/// copy of the CRL deleted (a thief would) it starts, and the bridge refuses it.
+#[test]
+fn a_revoked_identity_is_refused_at_start_and_by_its_peers() {
+    let (root, ks) = keystore("revoked");
+    ks.revoke("/tending/robot_1").unwrap();
+    let dir = ks.enclave_dir("/tending/robot_1");
+    let msg = refused(&dir, "/tending/robot_1");
+    eprintln!("revoked: {msg}");
+    for needle in ["revoked", "cert.pem", "crl.pem"] {
+        assert!(msg.contains(needle), "no `{needle}` in: {msg}");
+    }
+
+    std::fs::remove_file(dir.join("crl.pem")).unwrap();
+    let d = domain(5);
+    let (_sc, mut thief) = participant(d, &enclave(&ks, "/tending/robot_1"), "robot_node");
+    let (spied, commanded) = bridge_meets(d, &ks, &mut thief);
+    assert_eq!(spied, 0, "a revoked identity read robot_1's poses");
+    assert_eq!(commanded, 0, "a revoked identity commanded robot_1");
     std::fs::remove_dir_all(root).unwrap();
 }
