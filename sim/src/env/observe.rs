@@ -1,0 +1,78 @@
+//! Observations: each robot's view of the entity sets (the `obs` crate's layout).
+
+use super::Env;
+
+impl Env {
+    /// The entity counts every robot's observation has now.
+    pub fn obs_counts(&self) -> obs::Counts {
+        obs::Counts {
+            machines: self.m_id.len(),
+            storages: self.s_id.len(),
+            peers: self.r_id.len().saturating_sub(1),
+        }
+    }
+
+    /// Write every robot's observation (rows in robot order) into the given slices, sized
+    /// for `obs_counts()`: own n x 3, machines n x M x 3, storages n x K x 2, peers
+    /// n x (n-1) x 3.
+    pub fn observe_into(
+        &self,
+        own: &mut [f32],
+        machines: &mut [f32],
+        storages: &mut [f32],
+        peers: &mut [f32],
+    ) {
+        let n = self.r_id.len();
+        let (m, k) = (self.m_id.len(), self.s_id.len());
+        let pw = n.saturating_sub(1) * 3;
+        for i in 0..n {
+            let [x, y] = self.r_pos[i];
+            own[i * 3..i * 3 + 3].copy_from_slice(&[x, y, obs::flag(self.r_part[i])]);
+            let mo = &mut machines[i * m * 3..(i + 1) * m * 3];
+            for j in 0..m {
+                let c = self.m_box[j].centre;
+                mo[j * 3] = c[0] - x;
+                mo[j * 3 + 1] = c[1] - y;
+                mo[j * 3 + 2] = obs::flag(self.m_ready[j]);
+            }
+            let so = &mut storages[i * k * 2..(i + 1) * k * 2];
+            for j in 0..k {
+                let c = self.s_box[j].centre;
+                so[j * 2] = c[0] - x;
+                so[j * 2 + 1] = c[1] - y;
+            }
+            let po = &mut peers[i * pw..(i + 1) * pw];
+            // Peers in robot order without robot i: two straight runs, no per-item branch.
+            let (before, after) = po.split_at_mut(i * 3);
+            for (o, (q, &hp)) in before
+                .chunks_exact_mut(3)
+                .zip(self.r_pos[..i].iter().zip(&self.r_part[..i]))
+            {
+                o[0] = q[0] - x;
+                o[1] = q[1] - y;
+                o[2] = obs::flag(hp);
+            }
+            for (o, (q, &hp)) in after
+                .chunks_exact_mut(3)
+                .zip(self.r_pos[i + 1..].iter().zip(&self.r_part[i + 1..]))
+            {
+                o[0] = q[0] - x;
+                o[1] = q[1] - y;
+                o[2] = obs::flag(hp);
+            }
+        }
+    }
+
+    /// Every robot's observation as a batch (resized in place; no allocation once sized).
+    pub fn observe(&self, out: &mut obs::ObsBatch) {
+        out.resize(self.r_id.len(), self.obs_counts());
+        let obs::ObsBatch {
+            own,
+            machines,
+            storages,
+            peers,
+            ..
+        } = out;
+        self.observe_into(own, machines, storages, peers);
+    }
+}
