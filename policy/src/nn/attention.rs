@@ -438,17 +438,24 @@ impl MultiHeadAttention {
         dq_in: &mut [f32],
         dkv: Option<&mut [f32]>,
     ) {
-        let (e, h, dh) = (self.cfg.dim, self.cfg.heads, self.dh());
+        let e = self.cfg.dim;
         let d_o = sized(&mut c.d_o, b * e);
         self.out.backward(p, g, &c.o, dout, b, Some(d_o), false);
         if s == 0 {
             return;
         }
         let k = self.prepare_kv(p, kv, &mut c.enc_t);
-        let scale = 1.0 / (dh as f32).sqrt();
+        self.backward_value(p, g, b, c);
+        self.backward_scores(p, g, kv, k, b, s, c, dkv);
+        self.backward_query(p, g, q_in, b, c, dq_in);
+    }
+
+    /// Backward of O = ebar_h Wv_h^T + bv_h: grads of Wv and bv, writes `c.d_ebar`.
+    fn backward_value(&self, p: &[f32], g: &mut [f32], b: usize, c: &mut MhaCache) {
+        let (e, h, dh) = (self.cfg.dim, self.cfg.heads, self.dh());
         let w = &p[self.in_w.r()];
-        let (u, a, ebar) = (&c.u, &c.a, &c.ebar);
-        // value path
+        let d_o = &c.d_o[..b * e];
+        let ebar = &c.ebar;
         let d_ebar = sized(&mut c.d_ebar, b * h * e);
         {
             let gw = &mut g[self.in_w.r()];
@@ -491,10 +498,28 @@ impl MultiHeadAttention {
                 }
             }
         }
+    }
+
+    /// Backward of the softmax and scores, row by row: writes `c.d_u`, and for
+    /// [`Kv::Rows`] `dkv`, for [`Kv::Encoded`] accumulates the entity encoder's grads.
+    #[allow(clippy::too_many_arguments)]
+    fn backward_scores(
+        &self,
+        p: &[f32],
+        g: &mut [f32],
+        kv: Kv,
+        k: usize,
+        b: usize,
+        s: usize,
+        c: &mut MhaCache,
+        dkv: Option<&mut [f32]>,
+    ) {
+        let (e, h) = (self.cfg.dim, self.cfg.heads);
+        let (u, a) = (&c.u, &c.a);
         // softmax / score path, row by row
         let d_u = sized(&mut c.d_u, b * h * e);
         let n_chunks = b.div_ceil(ROW_CHUNK);
-        let d_ebar = &*d_ebar;
+        let d_ebar = &c.d_ebar[..b * h * e];
         let wt = &c.enc_t;
         // per chunk: its d_u rows and either its dkv rows or its encoder-gradient partial
         let part_len = (k + 1) * e;
@@ -553,6 +578,22 @@ impl MultiHeadAttention {
                 }
             }
         }
+    }
+
+    /// Backward of U = scale * Q_h Wk_h and Q = q_in Wq^T + bq: grads of Wk, Wq and bq,
+    /// ADDS into `dq_in`.
+    fn backward_query(
+        &self,
+        p: &[f32],
+        g: &mut [f32],
+        q_in: &[f32],
+        b: usize,
+        c: &mut MhaCache,
+        dq_in: &mut [f32],
+    ) {
+        let (e, h, dh) = (self.cfg.dim, self.cfg.heads, self.dh());
+        let scale = 1.0 / (dh as f32).sqrt();
+        let w = &p[self.in_w.r()];
         // U = scale * Q_h Wk_h
         let (d_u, q) = (&c.d_u, &c.q);
         let d_q = sized(&mut c.d_q, b * e);
@@ -609,268 +650,4 @@ impl MultiHeadAttention {
 }
 
 #[cfg(test)]
-mod tests {
-    use super::*;
-    use crate::nn::gradcheck::*;
-    use rand::SeedableRng;
-
-    fn make(e: usize, h: usize) -> (ParamStore, MultiHeadAttention) {
-        let mut rng = rand::rngs::StdRng::seed_from_u64(5);
-        let mut s = ParamStore::new();
-        let m = MultiHeadAttention::new(MhaConfig { dim: e, heads: h }, &mut s, "att", &mut rng);
-        // non-zero biases so every path is exercised
-        let rb = rand_vec(s.len(), 6);
-        for r in [m.in_b.r(), m.out.b.r()] {
-            for i in r {
-                s.data[i] = 0.2 * rb[i];
-            }
-        }
-        (s, m)
-    }
-
-    /// Textbook MHA with explicit K and V projections, in f64.
-    fn naive(
-        m: &MultiHeadAttention,
-        p: &[f32],
-        q_in: &[f32],
-        kv: &[f32],
-        b: usize,
-        s: usize,
-    ) -> Vec<f64> {
-        let (e, h) = (m.cfg.dim, m.cfg.heads);
-        let dh = e / h;
-        let w = &p[m.in_w.r()];
-        let bi = &p[m.in_b.r()];
-        let proj = |x: &[f32], blk: usize| -> Vec<f64> {
-            (0..e)
-                .map(|o| {
-                    bi[blk * e + o] as f64
-                        + (0..e)
-                            .map(|i| w[(blk * e + o) * e + i] as f64 * x[i] as f64)
-                            .sum::<f64>()
-                })
-                .collect()
-        };
-        let wo = &p[m.out.w.r()];
-        let bo = &p[m.out.b.r()];
-        let mut out = vec![];
-        for r in 0..b {
-            let q = proj(&q_in[r * e..(r + 1) * e], 0);
-            let ks: Vec<_> = (0..s)
-                .map(|j| proj(&kv[(r * s + j) * e..(r * s + j + 1) * e], 1))
-                .collect();
-            let vs: Vec<_> = (0..s)
-                .map(|j| proj(&kv[(r * s + j) * e..(r * s + j + 1) * e], 2))
-                .collect();
-            let mut o = vec![0.0f64; e];
-            if s > 0 {
-                for hh in 0..h {
-                    let sc: Vec<f64> = (0..s)
-                        .map(|j| {
-                            (0..dh)
-                                .map(|d| q[hh * dh + d] * ks[j][hh * dh + d])
-                                .sum::<f64>()
-                                / (dh as f64).sqrt()
-                        })
-                        .collect();
-                    let mx = sc.iter().cloned().fold(f64::MIN, f64::max);
-                    let ex: Vec<f64> = sc.iter().map(|x| (x - mx).exp()).collect();
-                    let z: f64 = ex.iter().sum();
-                    for d in 0..dh {
-                        o[hh * dh + d] = (0..s).map(|j| ex[j] / z * vs[j][hh * dh + d]).sum();
-                    }
-                }
-            }
-            for oo in 0..e {
-                out.push(bo[oo] as f64 + (0..e).map(|i| wo[oo * e + i] as f64 * o[i]).sum::<f64>());
-            }
-        }
-        out
-    }
-
-    #[test]
-    fn matches_textbook_attention_including_empty_set() {
-        let (st, m) = make(8, 2);
-        let b = 3;
-        for s in [0usize, 1, 4] {
-            let q_in = rand_vec(b * 8, 1);
-            let kv = rand_vec(b * s * 8, 2);
-            let mut c = MhaCache::default();
-            let mut out = vec![0.0; b * 8];
-            m.forward(&st.data, &q_in, Kv::Rows(&kv), b, s, &mut c, &mut out);
-            let want = naive(&m, &st.data, &q_in, &kv, b, s);
-            for (x, y) in out.iter().zip(&want) {
-                assert!((*x as f64 - y).abs() < 1e-5, "s={s}: {x} vs {y}");
-            }
-            if s == 0 {
-                assert_eq!(&out[..8], &st.data[m.out.b.r()]);
-            }
-        }
-    }
-
-    #[test]
-    fn gradients_match_finite_differences() {
-        let (mut st, m) = make(8, 2);
-        let (b, s) = (2, 3);
-        let q_in = rand_vec(b * 8, 3);
-        let kv = rand_vec(b * s * 8, 4);
-        let r = rand_vec(b * 8, 5);
-        let run = |p: &[f32], q: &[f32], k: &[f32]| {
-            let mut c = MhaCache::default();
-            let mut out = vec![0.0; b * 8];
-            m.forward(p, q, Kv::Rows(k), b, s, &mut c, &mut out);
-            dot_loss(&out, &r)
-        };
-        let mut c = MhaCache::default();
-        let mut out = vec![0.0; b * 8];
-        m.forward(&st.data, &q_in, Kv::Rows(&kv), b, s, &mut c, &mut out);
-        let mut dq = vec![0.0; b * 8];
-        let mut dkv = vec![0.0; b * s * 8];
-        let (p, g) = st.split();
-        m.backward(
-            p,
-            g,
-            &q_in,
-            Kv::Rows(&kv),
-            b,
-            s,
-            &mut c,
-            &r,
-            &mut dq,
-            Some(&mut dkv),
-        );
-        let num_p = numeric_grad(&mut st.data.clone(), |p| run(p, &q_in, &kv));
-        assert_grad_close("params", &st.grad, &num_p);
-        let num_q = numeric_grad(&mut q_in.clone(), |q| run(&st.data, q, &kv));
-        assert_grad_close("q_in", &dq, &num_q);
-        let num_k = numeric_grad(&mut kv.clone(), |k| run(&st.data, &q_in, k));
-        assert_grad_close("kv", &dkv, &num_k);
-        // every tensor gets a gradient (the key bias block alone is exactly zero, as in torch)
-        for ent in &st.entries {
-            assert!(
-                st.grad[ent.slot.r()].iter().any(|g| *g != 0.0),
-                "{}",
-                ent.name
-            );
-        }
-    }
-
-    #[test]
-    fn empty_set_backward_only_touches_out_proj() {
-        let (mut st, m) = make(8, 2);
-        let b = 2;
-        let q_in = rand_vec(b * 8, 3);
-        let mut c = MhaCache::default();
-        let mut out = vec![0.0; b * 8];
-        m.forward(&st.data, &q_in, Kv::Rows(&[]), b, 0, &mut c, &mut out);
-        let mut dq = vec![0.0; b * 8];
-        let (p, g) = st.split();
-        m.backward(
-            p,
-            g,
-            &q_in,
-            Kv::Rows(&[]),
-            b,
-            0,
-            &mut c,
-            &rand_vec(b * 8, 9),
-            &mut dq,
-            Some(&mut []),
-        );
-        assert!(dq.iter().all(|x| *x == 0.0));
-        assert!(st.grad[m.in_w.r()].iter().all(|x| *x == 0.0));
-        assert!(st.grad[m.out.b.r()].iter().any(|x| *x != 0.0));
-    }
-
-    /// The fused entity-encoder path against the old two-step one (Linear + ReLU rows,
-    /// then attention over them): forward bit-identical, gradients equal up to the
-    /// summation order of the encoder's weight gradient (row chunks), for batches that
-    /// span several chunks, at every SIMD level and on 1 and 2 threads.
-    #[test]
-    fn encoded_kv_matches_stored_rows_at_every_level_and_thread_count() {
-        use crate::nn::relu;
-        use crate::nn::simd::tests::at_every_level;
-        let mut rng = rand::rngs::StdRng::seed_from_u64(7);
-        let (mut st, m) = make(64, 4);
-        let enc = Linear::new(
-            LinearConfig {
-                d_in: 3,
-                d_out: 64,
-                init: Init::Orthogonal { gain: 1.4 },
-            },
-            &mut st,
-            "enc",
-            &mut rng,
-        );
-        let rb = rand_vec(64, 8);
-        st.data[enc.b.r()].copy_from_slice(&rb.iter().map(|v| 0.1 * v).collect::<Vec<_>>());
-        let (b, s) = (3 * ROW_CHUNK + 5, 7);
-        let q_in = rand_vec(b * 64, 1);
-        let x = rand_vec(b * s * 3, 2);
-        let r = rand_vec(b * 64, 3);
-        // reference: stored rows
-        let mut e = vec![0.0; b * s * 64];
-        enc.forward(&st.data, &x, b * s, &mut e);
-        relu::forward(&mut e);
-        let mut c = MhaCache::default();
-        let mut want = vec![0.0; b * 64];
-        m.forward(&st.data, &q_in, Kv::Rows(&e), b, s, &mut c, &mut want);
-        let mut g_ref = vec![0.0; st.len()];
-        let mut dq_ref = vec![0.0; b * 64];
-        let mut de = vec![0.0; b * s * 64];
-        m.backward(
-            &st.data,
-            &mut g_ref,
-            &q_in,
-            Kv::Rows(&e),
-            b,
-            s,
-            &mut c,
-            &r,
-            &mut dq_ref,
-            Some(&mut de),
-        );
-        relu::backward(&e, &mut de);
-        enc.backward(&st.data, &mut g_ref, &x, &de, b * s, None, false);
-        let run = || {
-            let mut c = MhaCache::default();
-            let mut out = vec![0.0; b * 64];
-            let kv = Kv::Encoded { x: &x, enc: &enc };
-            m.forward(&st.data, &q_in, kv, b, s, &mut c, &mut out);
-            let mut g = vec![0.0; st.len()];
-            let mut dq = vec![0.0; b * 64];
-            m.backward(&st.data, &mut g, &q_in, kv, b, s, &mut c, &r, &mut dq, None);
-            (out, g, dq)
-        };
-        let mut results = at_every_level(run);
-        for threads in [1, 2] {
-            let pool = rayon::ThreadPoolBuilder::new()
-                .num_threads(threads)
-                .build()
-                .unwrap();
-            results.push(pool.install(run));
-        }
-        for (out, g, dq) in &results {
-            assert_eq!(out, &want, "forward is bit-identical");
-            assert_eq!(dq, &dq_ref, "query gradient is bit-identical");
-            assert_eq!(
-                g, &results[0].1,
-                "same bits at every level and thread count"
-            );
-            let scale = g_ref.iter().fold(0.0f32, |m, v| m.max(v.abs()));
-            for (i, (x, y)) in g.iter().zip(&g_ref).enumerate() {
-                assert!((x - y).abs() <= 1e-5 * scale, "grad[{i}] {x} vs {y}");
-            }
-        }
-    }
-
-    #[test]
-    fn dot_avx2_has_the_scalar_bits() {
-        for n in [0, 3, 8, 16, 64, 67] {
-            let (a, b) = (rand_vec(n, 1), rand_vec(n, 2));
-            let want = dot_scalar(&a, &b);
-            assert_eq!(want.to_bits(), crate::nn::dot(&a, &b).to_bits());
-            assert_eq!(want.to_bits(), dot(&a, &b).to_bits());
-        }
-    }
-}
+mod tests;
