@@ -19,41 +19,7 @@ pub(super) fn synth(
     let mut w = BagWriter::create(dir)?;
     let machines = [[-0.8f64, 0.8], [0.8, 0.8]];
     let storages = [[0.0f64, -0.9]];
-    let rs = Profile::RobotStream.offered_qos_yaml();
-    w.add_topic(
-        topics::CLOCK,
-        &schema::CLOCK,
-        &Profile::Clock.offered_qos_yaml(),
-    )?;
-    w.add_topic(
-        topics::METRICS,
-        &schema::DIAGNOSTIC_ARRAY,
-        &Profile::Visualization.offered_qos_yaml(),
-    )?;
-    for (j, _) in machines.iter().enumerate() {
-        w.add_topic(
-            &format!("/machine_{j}/pose"),
-            &schema::POSE_STAMPED,
-            &Profile::LatchedPose.offered_qos_yaml(),
-        )?;
-        w.add_topic(
-            &format!("/machine_{j}/part_ready"),
-            &schema::BOOL,
-            &Profile::PartReady.offered_qos_yaml(),
-        )?;
-    }
-    for (k, _) in storages.iter().enumerate() {
-        w.add_topic(
-            &format!("/storage_{k}/pose"),
-            &schema::POSE_STAMPED,
-            &Profile::LatchedPose.offered_qos_yaml(),
-        )?;
-    }
-    for i in 0..robots {
-        w.add_topic(&format!("/robot_{i}/pose"), &schema::POSE_STAMPED, &rs)?;
-        w.add_topic(&format!("/robot_{i}/has_part"), &schema::BOOL, &rs)?;
-        w.add_topic(&format!("/robot_{i}/cmd_vel"), &schema::TWIST, &rs)?;
-    }
+    add_topics(&mut w, &machines, &storages, robots)?;
     let t0 = wall_ns();
     let start = Instant::now();
     let steps = (duration / 0.1).round() as u64;
@@ -125,35 +91,15 @@ pub(super) fn synth(
             }
         }
         if step % 10 == 0 {
-            let kv = |k: &str, v: String| msgs::KeyValue {
-                key: k.into(),
-                value: v,
-            };
-            let p_max = (machines.len() as u64 * steps / 20).max(1);
-            let d = DiagnosticArray {
-                header: msgs::Header {
-                    stamp,
-                    frame_id: String::new(),
-                },
-                status: vec![msgs::DiagnosticStatus {
-                    level: msgs::DiagnosticStatus::OK,
-                    name: "tending/metrics".into(),
-                    message: String::new(),
-                    hardware_id: "synth".into(),
-                    values: vec![
-                        kv("parts_delivered", deliveries.to_string()),
-                        kv("parts_collected", picks.to_string()),
-                        kv("collisions", "0".into()),
-                        kv(
-                            "machine_utilization",
-                            format!("{:.4}", picks as f64 / p_max as f64),
-                        ),
-                        kv("p_max", p_max.to_string()),
-                        kv("robots", robots.to_string()),
-                        kv("step", step.to_string()),
-                    ],
-                }],
-            };
+            let d = metrics_msg(
+                stamp,
+                step,
+                steps,
+                machines.len(),
+                robots,
+                picks,
+                deliveries,
+            );
             w.write_msg(topics::METRICS, t, &d)?;
         }
         step += 1;
@@ -166,4 +112,92 @@ pub(super) fn synth(
         dir.display()
     );
     Ok(())
+}
+
+/// The bag's topics: clock, metrics, each machine's pose and part_ready, each storage's
+/// pose, and each robot's pose, has_part and cmd_vel, with the contract's QoS.
+fn add_topics(
+    w: &mut BagWriter,
+    machines: &[[f64; 2]],
+    storages: &[[f64; 2]],
+    robots: usize,
+) -> Result<()> {
+    let rs = Profile::RobotStream.offered_qos_yaml();
+    w.add_topic(
+        topics::CLOCK,
+        &schema::CLOCK,
+        &Profile::Clock.offered_qos_yaml(),
+    )?;
+    w.add_topic(
+        topics::METRICS,
+        &schema::DIAGNOSTIC_ARRAY,
+        &Profile::Visualization.offered_qos_yaml(),
+    )?;
+    for (j, _) in machines.iter().enumerate() {
+        w.add_topic(
+            &format!("/machine_{j}/pose"),
+            &schema::POSE_STAMPED,
+            &Profile::LatchedPose.offered_qos_yaml(),
+        )?;
+        w.add_topic(
+            &format!("/machine_{j}/part_ready"),
+            &schema::BOOL,
+            &Profile::PartReady.offered_qos_yaml(),
+        )?;
+    }
+    for (k, _) in storages.iter().enumerate() {
+        w.add_topic(
+            &format!("/storage_{k}/pose"),
+            &schema::POSE_STAMPED,
+            &Profile::LatchedPose.offered_qos_yaml(),
+        )?;
+    }
+    for i in 0..robots {
+        w.add_topic(&format!("/robot_{i}/pose"), &schema::POSE_STAMPED, &rs)?;
+        w.add_topic(&format!("/robot_{i}/has_part"), &schema::BOOL, &rs)?;
+        w.add_topic(&format!("/robot_{i}/cmd_vel"), &schema::TWIST, &rs)?;
+    }
+    Ok(())
+}
+
+/// The /tending/metrics message of step `step` (of `steps`): the pick and delivery counts
+/// so far, utilization against `machines` parts per 2 s.
+fn metrics_msg(
+    stamp: Time,
+    step: u64,
+    steps: u64,
+    machines: usize,
+    robots: usize,
+    picks: u64,
+    deliveries: u64,
+) -> DiagnosticArray {
+    let kv = |k: &str, v: String| msgs::KeyValue {
+        key: k.into(),
+        value: v,
+    };
+    let p_max = (machines as u64 * steps / 20).max(1);
+    DiagnosticArray {
+        header: msgs::Header {
+            stamp,
+            frame_id: String::new(),
+        },
+        status: vec![msgs::DiagnosticStatus {
+            level: msgs::DiagnosticStatus::OK,
+            name: "tending/metrics".into(),
+            message: String::new(),
+            hardware_id: "synth".into(),
+            values: vec![
+                kv("parts_delivered", deliveries.to_string()),
+                kv("parts_collected", picks.to_string()),
+                kv("collisions", "0".into()),
+                kv(
+                    "machine_utilization",
+                    format!("{:.4}", picks as f64 / p_max as f64),
+                ),
+                kv("p_max", p_max.to_string()),
+                kv("robots", robots.to_string()),
+                kv("step", step.to_string()),
+            ],
+        }],
+    }
 }
