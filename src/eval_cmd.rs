@@ -1,13 +1,13 @@
 //! `tending eval`: a checkpoint (or a scripted baseline) over setups and seeds, reported
 //! as the paper does: per seed the mean over its episodes, then mean (std) over seeds.
 
+use crate::controller::CheckpointFlags;
 use crate::records::{self, EvalResultRecord};
 use crate::report::{self, Numbers};
 use crate::stats::markdown_table;
 use anyhow::{bail, Context, Result};
 use clap::Args;
 use policy::train::{evaluate, Controller};
-use policy::Policy;
 use sim::Setup;
 use std::path::PathBuf;
 
@@ -58,45 +58,16 @@ pub struct EvalArgs {
 pub fn run(a: EvalArgs) -> Result<()> {
     let (ctrl, label) = match (&a.checkpoint, a.policy.as_deref()) {
         (Some(p), None) => {
-            let pol = Policy::load(p).with_context(|| format!("load {}", p.display()))?;
-            let orca_filter =
-                a.orca_filter || (pol.trained_with_orca_filter() && !a.shield && !a.no_orca_filter);
-            // A target-action policy says so: its rows must not read as the paper's policy.
-            let targets = pol.actor().arch.actions == policy::ActionSpace::Targets;
-            let label = format!(
-                "{}{}{} ({})",
-                pol.kind(),
-                if targets { " targets" } else { "" },
-                if a.shield {
-                    "+shield"
-                } else if orca_filter {
-                    "+orca"
-                } else {
-                    ""
-                },
-                p.file_name()
-                    .and_then(|f| f.to_str())
-                    .unwrap_or("checkpoint")
-            );
-            let actor = Box::new(pol.actor().clone());
-            let sample = a.sample;
-            let ctrl = if a.shield {
-                Controller::Shielded { actor, sample }
-            } else if orca_filter {
-                Controller::Filtered {
-                    actor,
-                    sample,
-                    clearance: a.filter_clearance,
-                }
-            } else {
-                Controller::Learned { actor, sample }
+            let flags = CheckpointFlags {
+                sample: a.sample,
+                shield: a.shield,
+                orca_filter: a.orca_filter,
+                no_orca_filter: a.no_orca_filter,
+                clearance: a.filter_clearance,
             };
-            (ctrl, label)
+            crate::controller::checkpoint(p, &flags)?
         }
-        (None, Some("greedy")) => (Controller::Greedy, "greedy".to_string()),
-        (None, Some("greedy-orca")) => (Controller::GreedyOrca, "greedy-orca".to_string()),
-        (None, Some("random")) => (Controller::Random, "random".to_string()),
-        (None, Some(o)) => bail!("unknown --policy `{o}`: expected greedy, greedy-orca or random"),
+        (None, Some(name)) => (crate::controller::scripted(name)?, name.to_string()),
         (None, None) => bail!("pass --checkpoint <file> or --policy greedy|greedy-orca|random"),
         (Some(_), Some(_)) => bail!("--checkpoint and --policy are exclusive"),
     };

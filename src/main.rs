@@ -4,6 +4,7 @@
 mod bag_cmd;
 mod bench_sim;
 mod chart;
+mod controller;
 mod eval_cmd;
 mod fleet;
 mod plot;

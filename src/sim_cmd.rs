@@ -3,13 +3,13 @@
 //! runner ([`policy::train::run_episode_watched`]), so for the same setup, seed and
 //! controller both commands report the same numbers.
 
+use crate::controller::CheckpointFlags;
 use crate::render::Frame;
 use crate::report::{self, Numbers};
 use crate::stats::markdown_table;
 use anyhow::{bail, Context, Result};
 use clap::Args;
 use policy::train::{evaluate, run_episode_watched, Controller};
-use policy::Policy;
 use sim::{Env, Metrics, ScenarioConfig, Setup};
 use std::path::PathBuf;
 
@@ -58,34 +58,16 @@ pub fn load_config(path: &Option<PathBuf>) -> Result<ScenarioConfig> {
 /// The controller the arguments name, and its label for the table.
 fn controller(a: &SimArgs) -> Result<(Controller, String)> {
     let Some(path) = &a.checkpoint else {
-        let c = match a.policy.as_str() {
-            "greedy" => Controller::Greedy,
-            "greedy-orca" => Controller::GreedyOrca,
-            "random" => Controller::Random,
-            o => bail!("unknown --policy `{o}`: expected greedy, greedy-orca or random"),
-        };
-        return Ok((c, a.policy.clone()));
+        return Ok((crate::controller::scripted(&a.policy)?, a.policy.clone()));
     };
-    let pol = Policy::load(path).with_context(|| format!("--checkpoint {}", path.display()))?;
-    let (actor, sample) = (Box::new(pol.actor().clone()), a.sample);
-    let (c, mode) = if a.shield {
-        (Controller::Shielded { actor, sample }, "+shield")
-    } else if a.orca_filter || pol.trained_with_orca_filter() {
-        let clearance = obs::orca::FILTER_CLEARANCE;
-        let c = Controller::Filtered {
-            actor,
-            sample,
-            clearance,
-        };
-        (c, "+orca")
-    } else {
-        (Controller::Learned { actor, sample }, "")
+    let flags = CheckpointFlags {
+        sample: a.sample,
+        shield: a.shield,
+        orca_filter: a.orca_filter,
+        no_orca_filter: false,
+        clearance: obs::orca::FILTER_CLEARANCE,
     };
-    let file = path
-        .file_name()
-        .and_then(|f| f.to_str())
-        .unwrap_or("checkpoint");
-    Ok((c, format!("{}{mode} ({file})", pol.kind())))
+    crate::controller::checkpoint(path, &flags)
 }
 
 /// The table row of one policy on one setup: mean (std) over episodes.
@@ -165,7 +147,7 @@ mod tests {
         let pretrained = concat!(env!("CARGO_MANIFEST_DIR"), "/policy/pretrained/");
         let moves = format!("{pretrained}smappo_moves_6.4_2.safetensors");
         let bundled = format!("{pretrained}smappo_6.4_2.safetensors");
-        let actor = |p: &str| Box::new(Policy::load(p).unwrap().actor().clone());
+        let actor = |p: &str| Box::new(policy::Policy::load(p).unwrap().actor().clone());
         let dir = std::env::temp_dir().join(format!("tending-sim-{}", std::process::id()));
         std::fs::create_dir_all(&dir).unwrap();
         let gif = dir.join("ep.gif");
