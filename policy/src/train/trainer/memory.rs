@@ -26,9 +26,10 @@ fn part_row_bytes(kind: ModelKind, setup: Setup, cfg: &TrainConfig) -> usize {
                 + cfg.mappo_max_machines * obs::MACHINE_DIM
                 + cfg.mappo_max_storages * obs::STORAGE_DIM
                 + cfg.mappo_max_robots.saturating_sub(1) * obs::PEER_DIM;
-            // actor: input, its LayerNorm output and their gradients; critic: the same
-            // over [own ++ every robot's flat obs], plus both heads
-            4 * fd + 4 * fd * (1 + setup.robots) + 4_000
+            // actor: input, its LayerNorm output and their gradients; critic: its own
+            // block's copies (flat, gamma-scaled, xhat, gradient; `factored_input`) and the
+            // env block once per env-step (~2 fd per row), plus both heads
+            4 * fd + 6 * fd + 4_000
         }
     };
     4 * floats
