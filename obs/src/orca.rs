@@ -194,9 +194,17 @@ impl GreedyOrca {
         // Stop between the box clearance ORCA keeps and the reach: close enough to pick
         // or place, not so close that ORCA holds the robot off.
         let stand_off = r + 0.5 * (self.box_clearance() + p.reach);
-        if d <= stand_off {
+        // Closer than the clearance ORCA keeps (a peer pushed it in, or a late command in
+        // real time carried it past its stop): back out to the stand-off instead of
+        // resting against the box, where every waiting step would count as a contact.
+        // Between the clearance and the stand-off: stay.
+        let inner = r + self.box_clearance();
+        if (inner..=stand_off).contains(&d) || d < 1e-6 {
+            // d ~ 0: the centre is on or in the box, no direction to back out along;
+            // the contact physics pushes it out first.
             return [0.0, 0.0];
         }
+        // negative inside `inner`: away from the box
         let go = (d - stand_off) / d;
         let v = [q[0] * go / dt, q[1] * go / dt];
         let s = norm(v);
@@ -397,6 +405,30 @@ mod tests {
             v[1].abs() > 0.1 || v[0] < 0.2,
             "should swerve or slow: {v:?}"
         );
+    }
+
+    /// At the stand-off the robot waits; pushed inside the box clearance it backs out
+    /// (away from the box, back to the stand-off in one step), so a robot waiting at a
+    /// machine does not rest in contact with it.
+    #[test]
+    fn backs_out_when_closer_than_the_box_clearance() {
+        let c = GreedyOrca::new(params()).unwrap();
+        let half = [0.12, 0.12];
+        let stand_off = 0.08 + 0.5 * (c.box_clearance() + 0.08);
+        // machine to the right, its surface `gap` beyond the robot centre
+        let at = |gap: f32| {
+            c.preferred_towards(Some(Target {
+                rel: [gap + half[0], 0.0],
+                half,
+            }))
+        };
+        assert_eq!(at(stand_off), [0.0, 0.0]);
+        assert_eq!(at(0.08 + c.box_clearance() + 0.001), [0.0, 0.0]);
+        let v = at(0.085); // 5 mm from touching
+        assert!(v[0] < 0.0 && v[1].abs() < 1e-6, "{v:?}");
+        assert!((v[0] * 0.1 + (stand_off - 0.085)).abs() < 1e-5, "{v:?}");
+        let far = at(1.0);
+        assert!(far[0] > 0.49, "{far:?}");
     }
 
     #[test]
