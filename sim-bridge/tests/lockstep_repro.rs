@@ -7,65 +7,43 @@
 
 mod lockstep_common;
 
-use lockstep_common::{assert_same, fleet_lockstep, fleet_lockstep_in, Offline};
-use std::path::PathBuf;
+use lockstep_common::{
+    assert_same, fleet_lockstep, fleet_lockstep_in, greedy_policy_actions, offline_episode,
+    policy_with_states, pretrained, Offline,
+};
 
 use sim::{Env, ScenarioConfig, Setup};
 
 fn offline_greedy(setup: Setup, seed: u64, steps: u32) -> (Offline, Env) {
-    let mut env = Env::new(ScenarioConfig::default(), setup, seed).unwrap();
-    let first = env.clone();
-    let params = sim::baselines::greedy_params(env.sizes(), env.config());
-    let mut batch = obs::ObsBatch::default();
-    for _ in 0..steps {
-        env.observe(&mut batch);
-        let acts: Vec<u8> = (0..batch.rows)
-            .map(|r| {
-                sim::baselines::greedy_action(
-                    batch.own_row(r),
-                    batch.machines_row(r),
-                    batch.storages_row(r),
-                    batch.peers_row(r),
-                    &params,
-                )
-            })
-            .collect();
-        env.step_actions(&acts).unwrap();
-    }
-    let m = env.metrics();
-    (
-        Offline {
-            delivered: m.parts_delivered,
-            collected: m.parts_collected,
-            collisions: m.collisions,
-            mu: m.utilization(),
+    offline_episode(
+        setup,
+        seed,
+        steps,
+        |env| sim::baselines::greedy_params(env.sizes(), env.config()),
+        |params, batch, env| {
+            let acts: Vec<u8> = (0..batch.rows)
+                .map(|r| {
+                    sim::baselines::greedy_action(
+                        batch.own_row(r),
+                        batch.machines_row(r),
+                        batch.storages_row(r),
+                        batch.peers_row(r),
+                        params,
+                    )
+                })
+                .collect();
+            env.step_actions(&acts).unwrap();
         },
-        first,
     )
 }
 
 fn offline_policy(setup: Setup, seed: u64, steps: u32, path: &std::path::Path) -> Offline {
-    let mut env = Env::new(ScenarioConfig::default(), setup, seed).unwrap();
-    let mut pol = policy::Policy::load(path).unwrap();
-    let mut states: Vec<_> = (0..env.n_robots()).map(|_| pol.new_state()).collect();
-    let mut batch = obs::ObsBatch::default();
-    for _ in 0..steps {
-        env.observe(&mut batch);
-        let acts: Vec<u8> = (0..batch.rows)
-            .map(|r| {
-                pol.act(&batch.row(r), &mut states[r], policy::ActMode::Greedy)
-                    .unwrap()
-            })
-            .collect();
-        env.step_actions(&acts).unwrap();
-    }
-    let m = env.metrics();
-    Offline {
-        delivered: m.parts_delivered,
-        collected: m.parts_collected,
-        collisions: m.collisions,
-        mu: m.utilization(),
-    }
+    let init = |env: &Env| policy_with_states(path, env);
+    offline_episode(setup, seed, steps, init, |(pol, states), batch, env| {
+        env.step_actions(&greedy_policy_actions(pol, states, batch))
+            .unwrap();
+    })
+    .0
 }
 
 fn domain(offset: u16) -> u16 {
@@ -88,8 +66,7 @@ fn greedy_fleet_in_lockstep_reproduces_the_offline_episode() {
 #[test]
 fn paper_policy_fleet_in_lockstep_reproduces_the_offline_episode() {
     // The paper's 5-move policy, raw: its actions are stepped as the simulator's own.
-    let path = PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-        .join("../policy/pretrained/smappo_moves_6.4_2.safetensors");
+    let path = pretrained("smappo_moves_6.4_2.safetensors");
     if !path.exists() {
         eprintln!(
             "SKIPPED: no bundled checkpoint at {} (the greedy test covers lockstep)",
@@ -118,8 +95,7 @@ fn paper_policy_fleet_in_lockstep_reproduces_the_offline_episode() {
 /// authentication, access control and encryption change nothing the fleet computes.
 #[test]
 fn secure_policy_fleet_in_lockstep_reproduces_the_offline_episode() {
-    let path = PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-        .join("../policy/pretrained/smappo_moves_6.4_2.safetensors");
+    let path = pretrained("smappo_moves_6.4_2.safetensors");
     assert!(
         path.exists(),
         "the bundled checkpoint {} is missing",

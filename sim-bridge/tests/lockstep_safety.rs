@@ -11,113 +11,107 @@
 
 mod lockstep_common;
 
-use lockstep_common::{assert_same, fleet_lockstep, Offline};
-use std::path::PathBuf;
+use lockstep_common::{
+    assert_same, fleet_lockstep, greedy_policy_actions, offline_episode, policy_with_states,
+    pretrained, Offline,
+};
 
 use sim::{Env, ScenarioConfig, Setup};
 
-fn offline(env: &Env) -> Offline {
-    let m = env.metrics();
-    Offline {
-        delivered: m.parts_delivered,
-        collected: m.parts_collected,
-        collisions: m.collisions,
-        mu: m.utilization(),
-    }
-}
-
 fn offline_greedy_orca(setup: Setup, seed: u64, steps: u32) -> (Offline, Env) {
-    let mut env = Env::new(ScenarioConfig::default(), setup, seed).unwrap();
-    let first = env.clone();
-    let mut fleet = sim::baselines::GreedyOrcaFleet::new(&env).unwrap();
-    let (mut batch, mut vels) = (obs::ObsBatch::default(), Vec::new());
-    for _ in 0..steps {
-        env.observe(&mut batch);
-        fleet.act(&batch, &mut vels).unwrap();
-        env.step_velocities(&vels).unwrap();
-    }
-    (offline(&env), first)
+    let init = |env: &Env| {
+        (
+            sim::baselines::GreedyOrcaFleet::new(env).unwrap(),
+            Vec::new(),
+        )
+    };
+    offline_episode(setup, seed, steps, init, |(fleet, vels), batch, env| {
+        fleet.act(batch, vels).unwrap();
+        env.step_velocities(vels).unwrap();
+    })
 }
 
 fn offline_filtered(setup: Setup, seed: u64, steps: u32, path: &std::path::Path) -> Offline {
-    let mut env = Env::new(ScenarioConfig::default(), setup, seed).unwrap();
-    let mut fleet =
-        sim::baselines::GreedyOrcaFleet::new_filter(&env, obs::orca::FILTER_CLEARANCE).unwrap();
-    let k = env.config().task.k_speed;
-    let mut pol = policy::Policy::load(path).unwrap();
-    let mut states: Vec<_> = (0..env.n_robots()).map(|_| pol.new_state()).collect();
-    let (mut batch, mut vels) = (obs::ObsBatch::default(), Vec::new());
-    for _ in 0..steps {
-        env.observe(&mut batch);
-        let prefs: Vec<[f32; 2]> = (0..batch.rows)
-            .map(|r| {
-                let a = pol
-                    .act(&batch.row(r), &mut states[r], policy::ActMode::Greedy)
-                    .unwrap();
-                sim::action_to_velocity(a, k).unwrap()
-            })
-            .collect();
-        fleet.filter(&batch, &prefs, &mut vels).unwrap();
-        env.step_velocities(&vels).unwrap();
-    }
-    offline(&env)
+    let init = |env: &Env| {
+        let fleet =
+            sim::baselines::GreedyOrcaFleet::new_filter(env, obs::orca::FILTER_CLEARANCE).unwrap();
+        let k = env.config().task.k_speed;
+        (fleet, k, policy_with_states(path, env), Vec::new())
+    };
+    offline_episode(
+        setup,
+        seed,
+        steps,
+        init,
+        |(fleet, k, (pol, states), vels), batch, env| {
+            let prefs: Vec<[f32; 2]> = greedy_policy_actions(pol, states, batch)
+                .into_iter()
+                .map(|a| sim::action_to_velocity(a, *k).unwrap())
+                .collect();
+            fleet.filter(batch, &prefs, vels).unwrap();
+            env.step_velocities(vels).unwrap();
+        },
+    )
+    .0
 }
 
 /// The bundled target-action policy as robot_node runs it by default: the chosen box as a
 /// straight-line velocity (`obs::targets`), through the 40 mm ORCA filter.
 fn offline_targets(setup: Setup, seed: u64, steps: u32, path: &std::path::Path) -> Offline {
-    let mut env = Env::new(ScenarioConfig::default(), setup, seed).unwrap();
-    let mut fleet =
-        sim::baselines::GreedyOrcaFleet::new_filter(&env, obs::orca::FILTER_CLEARANCE).unwrap();
-    let planner = sim::baselines::GreedyOrcaFleet::new(&env).unwrap();
-    let mut pol = policy::Policy::load(path).unwrap();
-    assert_eq!(pol.actor().arch.actions, policy::ActionSpace::Targets);
-    let mut states: Vec<_> = (0..env.n_robots()).map(|_| pol.new_state()).collect();
-    let (mut batch, mut prefs, mut vels) = (obs::ObsBatch::default(), Vec::new(), Vec::new());
-    for _ in 0..steps {
-        env.observe(&mut batch);
-        let acts: Vec<u8> = (0..batch.rows)
-            .map(|r| {
-                pol.act(&batch.row(r), &mut states[r], policy::ActMode::Greedy)
-                    .unwrap()
-            })
-            .collect();
-        planner
-            .target_velocities(&batch, &acts, &mut prefs)
-            .unwrap();
-        fleet.filter(&batch, &prefs, &mut vels).unwrap();
-        env.step_velocities(&vels).unwrap();
-    }
-    offline(&env)
+    let init = |env: &Env| {
+        let fleet =
+            sim::baselines::GreedyOrcaFleet::new_filter(env, obs::orca::FILTER_CLEARANCE).unwrap();
+        let planner = sim::baselines::GreedyOrcaFleet::new(env).unwrap();
+        let (pol, states) = policy_with_states(path, env);
+        assert_eq!(pol.actor().arch.actions, policy::ActionSpace::Targets);
+        (fleet, planner, pol, states, Vec::new(), Vec::new())
+    };
+    offline_episode(
+        setup,
+        seed,
+        steps,
+        init,
+        |(fleet, planner, pol, states, prefs, vels), batch, env| {
+            let acts = greedy_policy_actions(pol, states, batch);
+            planner.target_velocities(batch, &acts, prefs).unwrap();
+            fleet.filter(batch, prefs, vels).unwrap();
+            env.step_velocities(vels).unwrap();
+        },
+    )
+    .0
 }
 
 fn offline_shielded(setup: Setup, seed: u64, steps: u32, path: &std::path::Path) -> Offline {
-    let mut env = Env::new(ScenarioConfig::default(), setup, seed).unwrap();
-    let sp = sim::baselines::shield_params(env.sizes(), env.config());
-    let mut pol = policy::Policy::load(path).unwrap();
-    let mut states: Vec<_> = (0..env.n_robots()).map(|_| pol.new_state()).collect();
-    let mut batch = obs::ObsBatch::default();
-    for _ in 0..steps {
-        env.observe(&mut batch);
-        let acts: Vec<u8> = (0..batch.rows)
-            .map(|r| {
-                let row = batch.row(r);
-                let mut l = [0.0f32; 5];
-                l.copy_from_slice(pol.logits(&row, &mut states[r]).unwrap());
-                let safe = obs::shield::safe_actions(
-                    row.own_row(0),
-                    row.machines_row(0),
-                    row.storages_row(0),
-                    row.peers_row(0),
-                    &sp,
-                );
-                obs::shield::mask_logits(&mut l, &safe);
-                policy::nn::categorical::argmax(&l) as u8
-            })
-            .collect();
-        env.step_actions(&acts).unwrap();
-    }
-    offline(&env)
+    let init = |env: &Env| {
+        let sp = sim::baselines::shield_params(env.sizes(), env.config());
+        (sp, policy_with_states(path, env))
+    };
+    offline_episode(
+        setup,
+        seed,
+        steps,
+        init,
+        |(sp, (pol, states)), batch, env| {
+            let acts: Vec<u8> = (0..batch.rows)
+                .map(|r| {
+                    let row = batch.row(r);
+                    let mut l = [0.0f32; 5];
+                    l.copy_from_slice(pol.logits(&row, &mut states[r]).unwrap());
+                    let safe = obs::shield::safe_actions(
+                        row.own_row(0),
+                        row.machines_row(0),
+                        row.storages_row(0),
+                        row.peers_row(0),
+                        sp,
+                    );
+                    obs::shield::mask_logits(&mut l, &safe);
+                    policy::nn::categorical::argmax(&l) as u8
+                })
+                .collect();
+            env.step_actions(&acts).unwrap();
+        },
+    )
+    .0
 }
 
 fn domain(offset: u16) -> u16 {
@@ -147,8 +141,7 @@ fn greedy_orca_fleet_in_lockstep_reproduces_the_offline_episode() {
 
 #[test]
 fn shielded_policy_fleet_in_lockstep_reproduces_the_offline_episode() {
-    let path = PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-        .join("../policy/pretrained/smappo_moves_6.4_2.safetensors");
+    let path = pretrained("smappo_moves_6.4_2.safetensors");
     if !path.exists() {
         eprintln!("SKIPPED: no bundled checkpoint at {}", path.display());
         return;
@@ -171,8 +164,7 @@ fn shielded_policy_fleet_in_lockstep_reproduces_the_offline_episode() {
 
 #[test]
 fn orca_filtered_policy_fleet_in_lockstep_reproduces_the_offline_episode() {
-    let path = PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-        .join("../policy/pretrained/smappo_moves_6.4_2.safetensors");
+    let path = pretrained("smappo_moves_6.4_2.safetensors");
     if !path.exists() {
         eprintln!("SKIPPED: no bundled checkpoint at {}", path.display());
         return;
@@ -195,8 +187,7 @@ fn orca_filtered_policy_fleet_in_lockstep_reproduces_the_offline_episode() {
 
 #[test]
 fn bundled_target_policy_fleet_in_lockstep_reproduces_the_offline_episode() {
-    let path = PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-        .join("../policy/pretrained/smappo_6.4_2.safetensors");
+    let path = pretrained("smappo_6.4_2.safetensors");
     let setup = Setup::new(6, 4, 2);
     let (seed, steps) = (2, 200);
     let off = offline_targets(setup, seed, steps, &path);

@@ -8,7 +8,7 @@ use std::path::PathBuf;
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
-use sim::{Env, Setup};
+use sim::{Env, ScenarioConfig, Setup};
 
 pub fn bin_dir() -> PathBuf {
     PathBuf::from(env!("CARGO_BIN_EXE_sim_bridge"))
@@ -32,6 +32,71 @@ pub struct Offline {
     pub collected: u32,
     pub collisions: u32,
     pub mu: f64,
+}
+
+impl Offline {
+    /// The metrics of `env`'s episode so far.
+    pub fn of(env: &Env) -> Self {
+        let m = env.metrics();
+        Offline {
+            delivered: m.parts_delivered,
+            collected: m.parts_collected,
+            collisions: m.collisions,
+            mu: m.utilization(),
+        }
+    }
+}
+
+/// An offline episode of `steps` steps of `setup` from `seed` (default scenario): `init`
+/// builds the controller from the first env, then every step `step` gets the controller,
+/// the observation batch and the env to step. Returns the metrics and the first env.
+pub fn offline_episode<C>(
+    setup: Setup,
+    seed: u64,
+    steps: u32,
+    init: impl FnOnce(&Env) -> C,
+    mut step: impl FnMut(&mut C, &obs::ObsBatch, &mut Env),
+) -> (Offline, Env) {
+    let mut env = Env::new(ScenarioConfig::default(), setup, seed).unwrap();
+    let first = env.clone();
+    let mut ctrl = init(&env);
+    let mut batch = obs::ObsBatch::default();
+    for _ in 0..steps {
+        env.observe(&mut batch);
+        step(&mut ctrl, &batch, &mut env);
+    }
+    (Offline::of(&env), first)
+}
+
+/// A bundled checkpoint of policy/pretrained.
+pub fn pretrained(file: &str) -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .join("../policy/pretrained")
+        .join(file)
+}
+
+/// A checkpoint's policy with one recurrent state per robot of `env`.
+pub fn policy_with_states(
+    path: &std::path::Path,
+    env: &Env,
+) -> (policy::Policy, Vec<policy::PolicyState>) {
+    let pol = policy::Policy::load(path).unwrap();
+    let states = (0..env.n_robots()).map(|_| pol.new_state()).collect();
+    (pol, states)
+}
+
+/// The most probable action of every row of `batch`.
+pub fn greedy_policy_actions(
+    pol: &mut policy::Policy,
+    states: &mut [policy::PolicyState],
+    batch: &obs::ObsBatch,
+) -> Vec<u8> {
+    (0..batch.rows)
+        .map(|r| {
+            pol.act(&batch.row(r), &mut states[r], policy::ActMode::Greedy)
+                .unwrap()
+        })
+        .collect()
 }
 
 struct Kill(Vec<Child>);
