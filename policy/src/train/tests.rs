@@ -1,4 +1,8 @@
 //! Trainer behaviour: exact resume, determinism, learning on an easy setup.
+//!
+//! Over 700 lines on purpose: the 21 tests of the trainer's observable behaviour share
+//! one set of small-run fixtures (tiny configs, short episodes), so they stay together
+//! rather than being spread over the trainer's files.
 
 use super::trainer::estimate_train_bytes;
 use super::*;
