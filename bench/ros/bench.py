@@ -52,8 +52,9 @@ def latency(a):
     ctrls = [("greedy", "")]
     if a.policy and not a.greedy_only:
         ctrls.append(("policy", a.policy))
+    modes = a.security.split(",")
     for rep in range(a.reps):
-        for name, pol in ctrls:
+        for name, pol, mode in [(n, p, m) for n, p in ctrls for m in modes]:
             la0 = loadavg()
             rn = os.path.join(ROOT, a.robot_node) if a.robot_node else os.path.join(REL, "robot_node")
             cmd = [os.path.join(REL, "ros_bench"), "latency", "--robot-node", rn,
@@ -61,6 +62,13 @@ def latency(a):
             if pol:
                 cmd += ["--policy", pol]
             cmd += ["--peers", str(a.peers), "--machines", str(a.machines), "--storages", str(a.storages)]
+            if mode == "on":
+                # a fresh keystore per run (ros_bench creates it)
+                ks = os.path.join(OUT, "logs", "keystores", f"latency-{os.getpid()}-{rep}-{name}")
+                subprocess.run(["rm", "-rf", ks], check=True)
+                cmd += ["--keystore", ks, "--warmup-s", str(a.warmup_s)]
+            elif a.security != "off":
+                cmd += ["--warmup-s", str(a.warmup_s)]
             r = subprocess.run(cmd, capture_output=True, text=True, timeout=a.n * a.interval_ms / 1000 * 2 + 90)
             line = [l for l in r.stdout.splitlines() if l.startswith("{")]
             if r.returncode != 0 or not line:
@@ -68,10 +76,10 @@ def latency(a):
                 continue
             v = json.loads(line[-1])
             v.update(kind=name, rep=rep, interval_ms=a.interval_ms, loadavg_before=la0, loadavg_after=loadavg(),
-                     variant=a.variant or None, robot_node=os.path.relpath(rn, ROOT),
+                     variant=a.variant or None, robot_node=os.path.relpath(rn, ROOT), security=mode,
                      time=time.strftime("%Y-%m-%dT%H:%M:%S"))
             append("latency.jsonl", v)
-            print(f"latency {name:6} {a.variant or ''} rep {rep} int {a.interval_ms} ms: state->cmd p50 {v['state_first_write_to_cmd_us']['p50']:.0f} us "
+            print(f"latency {name:6} {a.variant or ''} security {mode} rep {rep} int {a.interval_ms} ms: state->cmd p50 {v['state_first_write_to_cmd_us']['p50']:.0f} us "
                   f"p99 {v['state_first_write_to_cmd_us']['p99']:.0f} us | bare RTT p50 {v['bare_round_trip_us']['p50']:.0f} us "
                   f"p99 {v['bare_round_trip_us']['p99']:.0f} us | load {la0[0]:.2f}", flush=True)
 
@@ -82,7 +90,13 @@ STEADY_AFTER = 10  # s of robot uptime: the "steady" counts start at the first s
 SETUPS = {5: "5.4_2", 6: "6.4_2", 10: "10.6_4", 20: "20.12_4", 30: "30.18_4", 40: "40.24_4", 50: "50.16_4", 100: "100.16_2", 200: "200.16_2"}
 
 
-def fleet_run(n, secs, warm, policy, domain, tag, multi=False, robot_node=None, variant=None):
+def secure_env(env, keystore):
+    return dict(env, ROS_SECURITY_KEYSTORE=keystore, ROS_SECURITY_ENABLE="true",
+                ROS_SECURITY_STRATEGY="Enforce")
+
+
+def fleet_run(n, secs, warm, policy, domain, tag, multi=False, robot_node=None, variant=None,
+              secure=False):
     """n robots at 10 Hz on a realtime sim_bridge: one robot_node process per robot, or
     (multi) one robot_node process hosting all n robots (-p robots:=robot_0..n-1).
     robot_node: the binary (default target/release/robot_node); variant: its label."""
@@ -92,6 +106,17 @@ def fleet_run(n, secs, warm, policy, domain, tag, multi=False, robot_node=None, 
     os.makedirs(logdir, exist_ok=True)
     env = dict(os.environ, ROS_DOMAIN_ID=str(domain), RUST_LOG="info,rustdds=warn,ros2_client=warn")
     groups = [["robot_0..%d" % (n - 1)]] if multi else [[f"__ns:=/robot_{i}"] for i in range(n)]
+    ks = None
+    if secure:
+        # a fresh keystore with the fleet's enclaves (robot_<i>, sim_bridge), Enforce
+        ks = os.path.join(logdir, "keystore")
+        subprocess.run(["rm", "-rf", ks], check=True)
+        subprocess.run([os.path.join(REL, "tending"), "security", "create", ks, "--fleet", str(n)],
+                       check=True, capture_output=True)
+        if multi:
+            subprocess.run([os.path.join(REL, "tending"), "security", "enclave", ks, "/tending/all_robots",
+                            "--role", "robots:" + ",".join(f"robot_{i}" for i in range(n))],
+                           check=True, capture_output=True)
     nodes = []
     for gi, g in enumerate(groups):
         args = [robot_node, "--ros-args"]
@@ -103,15 +128,18 @@ def fleet_run(n, secs, warm, policy, domain, tag, multi=False, robot_node=None, 
                  "-p", f"stats_period_s:={STATS_PERIOD}"]
         if policy:
             args += ["-p", f"policy:={policy}"]
+        if ks:
+            args += ["--enclave", "/tending/all_robots" if multi else f"/tending/robot_{gi}"]
         out = open(os.path.join(logdir, f"node_{gi}.jsonl"), "w")
         err = open(os.path.join(logdir, f"node_{gi}.log"), "w")
-        nodes.append((subprocess.Popen(args, env=env, stdout=out, stderr=err, stdin=subprocess.DEVNULL,
+        nodes.append((subprocess.Popen(args, env=secure_env(env, ks) if ks else env, stdout=out, stderr=err, stdin=subprocess.DEVNULL,
                                        start_new_session=True), out, err))
     bout = open(os.path.join(logdir, "sim_bridge.jsonl"), "w")
     berr = open(os.path.join(logdir, "sim_bridge.log"), "w")
     bridge = subprocess.Popen([os.path.join(REL, "sim_bridge"), "--ros-args", "-p", f"setup:={setup}",
-                               "-p", "mode:=realtime", "-p", "rate_hz:=10", "-p", "seed:=0"],
-                              env=env, stdout=bout, stderr=berr, stdin=subprocess.DEVNULL, start_new_session=True)
+                               "-p", "mode:=realtime", "-p", "rate_hz:=10", "-p", "seed:=0"]
+                              + (["--enclave", "/tending/sim_bridge"] if ks else []),
+                              env=secure_env(env, ks) if ks else env, stdout=bout, stderr=berr, stdin=subprocess.DEVNULL, start_new_session=True)
     la0 = loadavg()
     time.sleep(warm)
     pids = [p.pid for p, _, _ in nodes]
@@ -174,6 +202,7 @@ def fleet_run(n, secs, warm, policy, domain, tag, multi=False, robot_node=None, 
     cpus = [c for c in cpus if c is not None]
     per_robot_cpu = [c / (n if multi else 1) for c in cpus]
     return dict(robots_n=n, multi=multi, variant=variant, robot_node=os.path.relpath(robot_node, ROOT),
+                security="on" if secure else "off", warm_s=warm,
                 processes=len(nodes), setup=setup, secs=secs, cpu_window_s=dt,
                 policy=policy, alive_at_end=alive, killed=killed,
                 finals=len(fin), ticks=ticks, ticks_missed=missed,
@@ -199,18 +228,19 @@ def fleet(a):
         variants = [tuple(v.split("=", 1)) for v in a.variants.split(",")]
     for rep in range(a.reps):
         for n in [int(x) for x in a.sizes.split(",")]:
-            for vi, (label, binary) in enumerate(variants):
-                vtag = f"-{label}" if label else ""
+            for vi, (label, binary, mode) in enumerate(
+                    [(l, b, m) for l, b in variants for m in a.security.split(",")]):
+                vtag = (f"-{label}" if label else "") + ("-secure" if mode == "on" else "")
                 tag = f"{n}-{'multi' if a.multi else 'procs'}{vtag}-r{rep}"
                 # ROS_DOMAIN_ID must stay <= 232
                 domain = (100 + vi * 30 if a.multi else 170) + rep * 8 + n % 8
                 v = fleet_run(n, a.secs, a.warm, a.policy, domain, tag, a.multi,
-                              os.path.join(ROOT, binary) if binary else None, label)
+                              os.path.join(ROOT, binary) if binary else None, label, mode == "on")
                 v["rep"] = rep
                 append("fleet.jsonl", v)
                 f = lambda x, d=1: "-" if x is None else f"{x:.{d}f}"
                 bm = v["bridge_metrics"] or {}
-                print(f"fleet {n:3} {'1 proc' if a.multi else 'procs '} {label or ''} rep {rep}: missed {v['ticks_missed']}/{v['ticks']} "
+                print(f"fleet {n:3} {'1 proc' if a.multi else 'procs '} {label or ''} security {mode} rep {rep}: missed {v['ticks_missed']}/{v['ticks']} "
                       f"({f(v['missed_pct'], 2)}%, worst robot {f(v['missed_pct_worst_node'], 2)}%) after {STEADY_AFTER} s: "
                       f"{v['steady_missed']}/{v['steady_ticks']} ({f(v['steady_missed_pct'], 2)}%, worst {f(v['steady_missed_pct_worst'], 2)}%, "
                       f"{v['steady_robots']} robots) late_max {v['tick_late_max_us']} us | "
@@ -235,6 +265,9 @@ def main():
     l.add_argument("--greedy-only", action="store_true")
     l.add_argument("--robot-node", default="", help="robot_node binary (path from the repo root)")
     l.add_argument("--variant", default="", help="label of that binary in the results")
+    l.add_argument("--security", default="off", choices=["off", "on", "off,on", "on,off"],
+                   help="DDS Security (Enforce) off, on, or both alternately (same rep, one after the other)")
+    l.add_argument("--warmup-s", type=float, default=5.0, help="ros_bench warm-up (with --security)")
     f = sub.add_parser("fleet")
     f.add_argument("--sizes", default="5,10,20")
     f.add_argument("--reps", type=int, default=3)
@@ -244,6 +277,8 @@ def main():
     f.add_argument("--multi", action="store_true", help="all robots in one robot_node process")
     f.add_argument("--variants", default="",
                    help="label=binary[,label=binary...] (paths from the repo root), run side by side")
+    f.add_argument("--security", default="off", choices=["off", "on", "off,on", "on,off"],
+                   help="DDS Security (Enforce, fresh keystore per run) off, on, or both alternately")
     a = ap.parse_args()
     {"latency": latency, "fleet": fleet}[a.cmd](a)
 

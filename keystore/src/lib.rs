@@ -195,6 +195,17 @@ impl Keystore {
 
     /// Create (or replace) enclave `name` with `role`'s permissions, valid over `validity`.
     pub fn create_enclave(&self, name: &str, role: &Role, validity: Validity) -> Result<PathBuf> {
+        self.create_enclave_with_grant(name, &role.grant(), validity)
+    }
+
+    /// Create (or replace) enclave `name` allowed exactly `grant` (tools and benchmarks
+    /// whose topics are not a fleet role's), valid over `validity`.
+    pub fn create_enclave_with_grant(
+        &self,
+        name: &str,
+        grant: &Grant,
+        validity: Validity,
+    ) -> Result<PathBuf> {
         check_enclave_name(name)?;
         let (ca, ca_key, ca_key_pem) = self.ca()?;
         let ca_pem = read(&self.ca_cert_path())?;
@@ -227,7 +238,7 @@ impl Keystore {
             &format!("CN={name}"),
             validity.not_before,
             validity.not_after,
-            &role.grant(),
+            grant,
         );
         write(&dir.join("permissions.xml"), &xml)?;
         let signed = smime::sign(xml.as_bytes(), &ca_pem, &ca_key_pem)?;

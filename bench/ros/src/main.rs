@@ -2,7 +2,7 @@
 //!
 //! ```text
 //! ros_bench latency --robot-node PATH [--policy CKPT] [--n 200] [--interval-ms 100]
-//!                   [--peers 5] [--machines 4] [--storages 2] [--domain D]
+//!                   [--peers 5] [--machines 4] [--storages 2] [--domain D] [--keystore KS]
 //! ros_bench echo --domain D          (helper process: /bench/ping -> /bench/pong)
 //! ros_bench mkpolicy PATH            (random-weights SMAPPO checkpoint)
 //! ```
@@ -14,6 +14,10 @@
 //! state, one bare DDS round trip to a separate `echo` process (same writer kind, same QoS)
 //! is measured, so both numbers come from the same run under the same load. One JSON line
 //! with the summary goes to stdout.
+//!
+//! `--keystore KS`: the same with DDS Security (Enforce): KS is created if missing (as
+//! `tending security create`), robot_node runs in enclave `/tending/robot_0`, this process
+//! and the echo helper in `/bench/driver` (the bridge's topics plus `/bench/*`).
 
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
@@ -28,9 +32,49 @@ use ros2_client::dds::{Context, Node, Subscription};
 const PING: &str = "/bench/ping";
 const PONG: &str = "/bench/pong";
 
+/// The enclave of this process and the echo helper when `--keystore` is given.
+const BENCH_ENCLAVE: &str = "/bench/driver";
+const ROBOT_ENCLAVE: &str = "/tending/robot_0";
+
+/// Open (or create) keystore `root` with the benchmark's two enclaves.
+fn bench_keystore(root: &str) -> Result<keystore::Keystore> {
+    let ks = if std::path::Path::new(root)
+        .join("public/ca.cert.pem")
+        .is_file()
+    {
+        keystore::Keystore::open(root)?
+    } else {
+        keystore::Keystore::create(root)?
+    };
+    let v = keystore::Validity::days_from_now(1);
+    // The bridge's side (as a player: the world state out) plus cmd_vel in and the
+    // bare round trip's topics both ways.
+    let mut g = keystore::Role::Player.grant();
+    g.subscribe.push("rt/*/cmd_vel".into());
+    for t in [PING, PONG] {
+        g.publish.push(keystore::policy::dds_topic(t));
+        g.subscribe.push(keystore::policy::dds_topic(t));
+    }
+    ks.create_enclave_with_grant(BENCH_ENCLAVE, &g, v)?;
+    ks.create_enclave(
+        ROBOT_ENCLAVE,
+        &keystore::Role::Robots(vec!["robot_0".into()]),
+        v,
+    )?;
+    Ok(ks)
+}
+
 /// A node nobody spins: the benchmark needs no graph events, only its endpoints.
+/// Security from the environment (`ROS_SECURITY_*`), or `sec` if given.
 fn node(domain: u16, name: &str) -> Result<(Context, Node)> {
-    let ctx = ros::context(domain, None)?;
+    node_with(domain, name, None)
+}
+
+fn node_with(domain: u16, name: &str, sec: Option<&ros::Security>) -> Result<(Context, Node)> {
+    let ctx = match sec {
+        Some(s) => ros::context_with(domain, s)?,
+        None => ros::context(domain, None)?,
+    };
     let spec = ros::NodeSpec {
         namespace: "/",
         name,
@@ -140,6 +184,8 @@ struct LatencyArgs {
     machines: u32,
     storages: u32,
     domain: u16,
+    /// DDS Security with this keystore (empty: off).
+    keystore: String,
 }
 
 impl LatencyArgs {
@@ -158,6 +204,7 @@ impl LatencyArgs {
             machines: arg(args, "--machines", 4)?,
             storages: arg(args, "--storages", 2)?,
             domain: arg(args, "--domain", 100 + (std::process::id() % 100) as u16)?,
+            keystore: arg(args, "--keystore", String::new())?,
         })
     }
 
@@ -288,21 +335,30 @@ impl Replies {
 /// The echo helper and the robot_node under test (lockstep, stats as JSON on stdout).
 fn spawn_peers(a: &LatencyArgs) -> Result<(Kill, Kill)> {
     let exe = std::env::current_exe()?;
-    let echo = Kill(
-        Command::new(&exe)
-            .args([
-                "echo",
-                "--domain",
-                &a.domain.to_string(),
-                "--max-s",
-                &format!("{}", a.max_s() + 10.0),
-            ])
-            .stdin(Stdio::null())
-            .stdout(Stdio::null())
-            .spawn()
-            .context("starting the echo process")?,
-    );
+    let mut echo = Command::new(&exe);
     let mut rn = Command::new(&a.robot_node);
+    if !a.keystore.is_empty() {
+        for c in [&mut echo, &mut rn] {
+            c.env("ROS_SECURITY_KEYSTORE", &a.keystore)
+                .env("ROS_SECURITY_ENABLE", "true")
+                .env("ROS_SECURITY_STRATEGY", "Enforce");
+        }
+        echo.env("ROS_SECURITY_ENCLAVE_OVERRIDE", BENCH_ENCLAVE);
+        rn.env_remove("ROS_SECURITY_ENCLAVE_OVERRIDE");
+    }
+    let echo = Kill(
+        echo.args([
+            "echo",
+            "--domain",
+            &a.domain.to_string(),
+            "--max-s",
+            &format!("{}", a.max_s() + 10.0),
+        ])
+        .stdin(Stdio::null())
+        .stdout(Stdio::null())
+        .spawn()
+        .context("starting the echo process")?,
+    );
     rn.env("ROS_DOMAIN_ID", a.domain.to_string())
         .env("RUST_LOG", "warn")
         .args([
@@ -325,6 +381,9 @@ fn spawn_peers(a: &LatencyArgs) -> Result<(Kill, Kill)> {
         .stderr(Stdio::inherit());
     if !a.policy.is_empty() {
         rn.args(["-p", &format!("policy:={}", a.policy)]);
+    }
+    if !a.keystore.is_empty() {
+        rn.args(["--enclave", ROBOT_ENCLAVE]);
     }
     let robot = Kill(
         rn.spawn()
@@ -454,7 +513,16 @@ impl Latency {
 fn latency(args: &[String]) -> Result<()> {
     let a = LatencyArgs::parse(args)?;
     let me = "robot_0";
-    let (ctx, mut node) = node(a.domain, "bench_bridge")?;
+    let sec = if a.keystore.is_empty() {
+        None
+    } else {
+        let ks = bench_keystore(&a.keystore)?;
+        Some(ros::Security::Enclave {
+            enclave: BENCH_ENCLAVE.into(),
+            dir: ks.enclave_dir(BENCH_ENCLAVE),
+        })
+    };
+    let (ctx, mut node) = node_with(a.domain, "bench_bridge", sec.as_ref())?;
     let state = StateWriters::new(&ctx, &node, me, &a)?;
     let replies = Replies::new(&mut node, me)?;
     let ping = StampedWriter::<Twist>::new(&ctx, &node, PING, Profile::RobotStream)?;
