@@ -82,6 +82,10 @@ fn combine(a: (f32, f32, f32), b: (f32, f32, f32)) -> (f32, f32, f32) {
 }
 
 impl FactoredRows<'_> {
+    fn groups(&self, n: usize) -> usize {
+        n / self.group
+    }
+
     fn check(&self, d_in: usize, n: usize) {
         assert!(
             self.group > 0 && n.is_multiple_of(self.group),
@@ -209,45 +213,37 @@ impl MlpBase {
         dout: &[f32],
     ) {
         self.backward_tail(p, g, c, dout);
-        let (n, h, d) = (c.n, self.hidden, self.d_in);
-        let (d_own, d_sh) = (x.d_own, x.d_sh);
-        let groups = n / x.group;
+        let rows = BackRows {
+            x,
+            n: c.n,
+            da: &c.d_a,
+            mean: &c.m0,
+            rstd: &c.s0,
+        };
+        let f = &mut c.fac;
+        rows.group_sums(self.hidden, f);
+        self.first_linear_grads(p, g, &rows, f);
+        self.feature_ln_grads(p, g, &rows, f);
+    }
+
+    /// The first Linear's gradients: bias `S`; `dW[:, own] += da^T xhat_own` (the own
+    /// block of xhat is per row); `dW[:, shared] += sum_g U_g (gamma.shared_g)^T`; and for
+    /// every column past the own block (shared and padding), xhat = (x - mu) rstd gamma +
+    /// beta contributes `-V gamma^T + S beta^T`.
+    fn first_linear_grads(&self, p: &[f32], g: &mut [f32], r: &BackRows, f: &mut FactoredCache) {
+        let (n, h, d) = (r.n, self.hidden, self.d_in);
+        let (d_own, d_sh) = (r.x.d_own, r.x.d_sh);
         let gm = &p[self.feat_ln.gamma.r()];
         let bt = &p[self.feat_ln.beta.r()];
-        let w = &p[self.fc[0].w.r()];
-        let (mean, rstd, da) = (&c.m0, &c.s0, &c.d_a);
-        let f = &mut c.fac;
-
-        // Per-row sums the shared block needs: U_g = sum_(r in g) da_r rstd_r,
-        // V = sum_r da_r mu_r rstd_r, S = sum_r da_r.
-        let u = sized(&mut f.u_group, groups * h);
-        u.iter_mut().for_each(|v| *v = 0.0);
-        let v_mu = sized(&mut f.u_mu, h);
-        v_mu.iter_mut().for_each(|v| *v = 0.0);
-        let s = sized(&mut f.da_sum, h);
-        s.iter_mut().for_each(|v| *v = 0.0);
-        for r in 0..n {
-            let (m, rs) = (mean[r], rstd[r]);
-            let ug = &mut u[(r / x.group) * h..(r / x.group + 1) * h];
-            for o in 0..h {
-                let dv = da[r * h + o];
-                ug[o] += dv * rs;
-                v_mu[o] += dv * m * rs;
-                s[o] += dv;
-            }
-        }
-
-        // Linear bias: sum_r da_r.
+        let (u, v_mu, s) = (&f.u_group, &f.u_mu, &f.da_sum);
         for (gb, sv) in g[self.fc[0].b.r()].iter_mut().zip(s.iter()) {
             *gb += sv;
         }
-
-        // dW[:, own] += da^T xhat_own (the own block of xhat is per row).
         let xo = sized(&mut f.xhat_own, n * d_own);
-        for r in 0..n {
-            let (m, rs) = (mean[r], rstd[r]);
+        for i in 0..n {
+            let (m, rs) = (r.mean[i], r.rstd[i]);
             for j in 0..d_own {
-                xo[r * d_own + j] = (x.own[r * d_own + j] - m) * rs * gm[j] + bt[j];
+                xo[i * d_own + j] = (r.x.own[i * d_own + j] - m) * rs * gm[j] + bt[j];
             }
         }
         let gw = &mut g[self.fc[0].w.r()];
@@ -256,29 +252,18 @@ impl MlpBase {
             n,
             d_own,
             1.0,
-            View {
-                data: da,
-                rs: 1,
-                cs: h,
-            },
+            transposed(r.da, h),
             rm(xo, d_own),
             1.0,
             gw,
             d,
         );
-        // dW[:, shared] += sum_g U_g (gamma.shared_g)^T; then for every column past the own
-        // block (shared and padding), xhat = (x - mu) rstd gamma + beta contributes
-        // -V gamma^T + S beta^T.
         gemm(
             h,
-            groups,
+            r.x.groups(n),
             d_sh,
             1.0,
-            View {
-                data: u,
-                rs: 1,
-                cs: h,
-            },
+            transposed(u, h),
             rm(&f.g_sh, d_sh),
             1.0,
             &mut gw[d_own..],
@@ -290,12 +275,17 @@ impl MlpBase {
                 *v += -v_mu[o] * gm[d_own + j] + s[o] * bt[d_own + j];
             }
         }
+    }
 
-        // Feature LayerNorm. dxhat_r = W^T da_r.
-        //   dbeta  = sum_r dxhat_r = W^T S (every column)
-        //   dgamma = sum_r dxhat_r . (x_r - mu_r) rstd_r:
-        //     own columns per row (dxhat_own = da W_own);
-        //     past the own block: sum_g shared_g . (U_g W_sh) - W^T V.
+    /// The feature LayerNorm's gradients, with dxhat_r = W^T da_r:
+    ///   dbeta  = sum_r dxhat_r = W^T S (every column);
+    ///   dgamma = sum_r dxhat_r . (x_r - mu_r) rstd_r: own columns per row
+    ///   (dxhat_own = da W_own); past the own block: sum_g shared_g . (U_g W_sh) - W^T V.
+    fn feature_ln_grads(&self, p: &[f32], g: &mut [f32], r: &BackRows, f: &mut FactoredCache) {
+        let (n, h, d) = (r.n, self.hidden, self.d_in);
+        let (d_own, d_sh) = (r.x.d_own, r.x.d_sh);
+        let w = &p[self.fc[0].w.r()];
+        let (u, v_mu, s) = (&f.u_group, &f.u_mu, &f.da_sum);
         let dcol = sized(&mut f.dcol, 2 * d);
         dcol.iter_mut().for_each(|v| *v = 0.0);
         let (dgamma, dbeta) = dcol.split_at_mut(d);
@@ -308,46 +298,30 @@ impl MlpBase {
                 dgamma[j] -= wr[j] * v_mu[o];
             }
         }
+        // W row-major hidden x d_in read as d_in x hidden (rs = d, cs = 1).
+        let w_own = View {
+            data: w,
+            rs: d,
+            cs: 1,
+        };
         let dxo = sized(&mut f.d_own, n * d_own);
-        gemm(
-            n,
-            h,
-            d_own,
-            1.0,
-            rm(da, h),
-            View {
-                data: w,
-                rs: d,
-                cs: 1,
-            },
-            0.0,
-            dxo,
-            d_own,
-        );
-        for r in 0..n {
-            let (m, rs) = (mean[r], rstd[r]);
+        gemm(n, h, d_own, 1.0, rm(r.da, h), w_own, 0.0, dxo, d_own);
+        for i in 0..n {
+            let (m, rs) = (r.mean[i], r.rstd[i]);
             for j in 0..d_own {
-                dgamma[j] += dxo[r * d_own + j] * (x.own[r * d_own + j] - m) * rs;
+                dgamma[j] += dxo[i * d_own + j] * (r.x.own[i * d_own + j] - m) * rs;
             }
         }
+        let groups = r.x.groups(n);
         let t = sized(&mut f.t_sh, groups * d_sh);
-        gemm(
-            groups,
-            h,
-            d_sh,
-            1.0,
-            rm(u, h),
-            View {
-                data: &w[d_own..],
-                rs: d,
-                cs: 1,
-            },
-            0.0,
-            t,
-            d_sh,
-        );
+        let w_sh = View {
+            data: &w[d_own..],
+            rs: d,
+            cs: 1,
+        };
+        gemm(groups, h, d_sh, 1.0, rm(u, h), w_sh, 0.0, t, d_sh);
         for gi in 0..groups {
-            let sh = &x.shared[gi * d_sh..(gi + 1) * d_sh];
+            let sh = &r.x.shared[gi * d_sh..(gi + 1) * d_sh];
             let tg = &t[gi * d_sh..(gi + 1) * d_sh];
             for j in 0..d_sh {
                 dgamma[d_own + j] += sh[j] * tg[j];
@@ -359,6 +333,50 @@ impl MlpBase {
         for (a, v) in g[self.feat_ln.beta.r()].iter_mut().zip(dbeta.iter()) {
             *a += v;
         }
+    }
+}
+
+/// What the backward phases read: the rows, the first Linear's output gradient and the
+/// feature LayerNorm's row statistics.
+struct BackRows<'a> {
+    x: FactoredRows<'a>,
+    n: usize,
+    /// rows x hidden
+    da: &'a [f32],
+    mean: &'a [f32],
+    rstd: &'a [f32],
+}
+
+impl BackRows<'_> {
+    /// Per-row sums the shared block needs: `U_g = sum_(r in g) da_r rstd_r`,
+    /// `V = sum_r da_r mu_r rstd_r`, `S = sum_r da_r`.
+    fn group_sums(&self, h: usize, f: &mut FactoredCache) {
+        let u = sized(&mut f.u_group, self.x.groups(self.n) * h);
+        u.iter_mut().for_each(|v| *v = 0.0);
+        let v_mu = sized(&mut f.u_mu, h);
+        v_mu.iter_mut().for_each(|v| *v = 0.0);
+        let s = sized(&mut f.da_sum, h);
+        s.iter_mut().for_each(|v| *v = 0.0);
+        for r in 0..self.n {
+            let (m, rs) = (self.mean[r], self.rstd[r]);
+            let gi = r / self.x.group;
+            let ug = &mut u[gi * h..(gi + 1) * h];
+            for o in 0..h {
+                let dv = self.da[r * h + o];
+                ug[o] += dv * rs;
+                v_mu[o] += dv * m * rs;
+                s[o] += dv;
+            }
+        }
+    }
+}
+
+/// `a` (rows x cols, row-major) read as its transpose.
+fn transposed(a: &[f32], cols: usize) -> View<'_> {
+    View {
+        data: a,
+        rs: 1,
+        cs: cols,
     }
 }
 
