@@ -2,7 +2,9 @@
 //! Run: cargo run -p policy --release --example bench_nn
 
 use obs::{Counts, ObsBatch};
-use policy::{ActMode, Actor, ArchConfig, Critic, Policy, PpoActorConfig, ValueLossConfig};
+use policy::{
+    ActMode, Actor, ArchConfig, Critic, Policy, PpoActorConfig, Sequences, ValueLossConfig,
+};
 use rand::{Rng, SeedableRng};
 use std::time::Instant;
 
@@ -85,21 +87,12 @@ fn main() {
     let old_logp = vec![-1.6f32; t * b];
     let adv: Vec<f32> = (0..t * b).map(|_| rng.gen_range(-1.0..1.0)).collect();
     let mut actor = Actor::new(ArchConfig::smappo(), 1);
+    let seq = Sequences::new(&obs, t, b, &h0, &masks);
     let mut times = vec![];
     for i in 0..12 {
         let t0 = Instant::now();
         actor
-            .ppo_grads(
-                &obs,
-                t,
-                b,
-                &h0,
-                &masks,
-                &actions,
-                &old_logp,
-                &adv,
-                PpoActorConfig::default(),
-            )
+            .ppo_grads(seq, &actions, &old_logp, &adv, PpoActorConfig::default())
             .unwrap();
         actor.step(10.0);
         if i >= 2 {
@@ -129,21 +122,12 @@ fn main() {
     let old_v = vec![0.0f32; t * b];
     let ret: Vec<f32> = (0..t * b).map(|_| rng.gen_range(-1.0..1.0)).collect();
     let mut critic = Critic::new(ArchConfig::smappo(), 2);
+    let seq = Sequences::new(&obs, t, b, &h0, &masks);
     let mut times = vec![];
     for i in 0..7 {
         let t0 = Instant::now();
         critic
-            .value_grads(
-                &obs,
-                t,
-                b,
-                n,
-                &h0,
-                &masks,
-                &old_v,
-                &ret,
-                ValueLossConfig::default(),
-            )
+            .value_grads(seq, n, &old_v, &ret, ValueLossConfig::default())
             .unwrap();
         critic.step(10.0);
         if i >= 2 {

@@ -10,7 +10,7 @@
 //! same function.
 
 use obs::{Counts, ObsBatch};
-use policy::{Actor, ArchConfig, Critic, Policy, PpoActorConfig, ValueLossConfig};
+use policy::{Actor, ArchConfig, Critic, Policy, PpoActorConfig, Sequences, ValueLossConfig};
 use rand::{Rng, SeedableRng};
 use safetensors::tensor::{Dtype, TensorView};
 use std::time::Instant;
@@ -69,6 +69,12 @@ fn actor_batch(rng: &mut impl Rng) -> Batch {
     }
 }
 
+impl Batch {
+    fn seq(&self, t: usize, b: usize) -> Sequences<'_> {
+        Sequences::new(&self.obs, t, b, &self.h0, &self.masks)
+    }
+}
+
 fn export(ckpt: &str, out: &str) {
     let mut rng = rand::rngs::StdRng::seed_from_u64(0);
     let bt = actor_batch(&mut rng);
@@ -81,11 +87,7 @@ fn export(ckpt: &str, out: &str) {
     actor.params.zero_grad();
     let st = actor
         .ppo_grads(
-            &bt.obs,
-            t,
-            b,
-            &bt.h0,
-            &bt.masks,
+            bt.seq(t, b),
             &bt.actions,
             &bt.old_logp,
             &bt.adv,
@@ -178,21 +180,12 @@ fn main() {
         let old_v = vec![0.0f32; t * b];
         let ret: Vec<f32> = (0..t * b).map(|_| rng.gen_range(-1.0..1.0)).collect();
         let mut critic = Critic::new(ArchConfig::smappo(), 2);
+        let seq = Sequences::new(&obs, t, b, &h0, &masks);
         let c0 = cpu_secs();
         for _ in 0..steps {
             let t0 = Instant::now();
             critic
-                .value_grads(
-                    &obs,
-                    t,
-                    b,
-                    n,
-                    &h0,
-                    &masks,
-                    &old_v,
-                    &ret,
-                    ValueLossConfig::default(),
-                )
+                .value_grads(seq, n, &old_v, &ret, ValueLossConfig::default())
                 .unwrap();
             critic.step(10.0);
             println!("{:.2}", t0.elapsed().as_secs_f64() * 1e3);
@@ -204,28 +197,17 @@ fn main() {
         return;
     }
     let b = 480;
-    let Batch {
-        obs,
-        h0,
-        masks,
-        actions,
-        old_logp,
-        adv,
-    } = actor_batch(&mut rng);
+    let bt = actor_batch(&mut rng);
     let mut actor = Actor::new(ArchConfig::smappo(), 1);
     let c0 = cpu_secs();
     for _ in 0..steps {
         let t0 = Instant::now();
         actor
             .ppo_grads(
-                &obs,
-                t,
-                b,
-                &h0,
-                &masks,
-                &actions,
-                &old_logp,
-                &adv,
+                bt.seq(t, b),
+                &bt.actions,
+                &bt.old_logp,
+                &bt.adv,
                 PpoActorConfig::default(),
             )
             .unwrap();

@@ -8,6 +8,7 @@ use crate::error::{check_len, PolicyError};
 use crate::head::{HeadCache, RecurrentHead};
 use crate::mlp_base::{MlpBase, MlpCache};
 use crate::nn::{categorical, clip_grad_norm, sized, Adam, AdamConfig, ParamStore};
+use crate::sequences::Sequences;
 use obs::{FlatLayout, ObsBatch, ObsError};
 use rand::SeedableRng;
 
@@ -263,76 +264,32 @@ impl Actor {
     }
 
     /// Forward + PPO clipped surrogate with entropy bonus + backward (gradients accumulate).
-    /// `actions`, `old_logp`, `adv` have T*B entries.
-    #[allow(clippy::too_many_arguments)]
+    /// `actions`, `old_logp`, `adv` have T*B entries; losses, statistics and gradients are
+    /// these rows' share of the mean over `seq.total_rows`.
     pub fn ppo_grads(
         &mut self,
-        obs: &ObsBatch,
-        t: usize,
-        b: usize,
-        h0: &[f32],
-        masks: &[f32],
+        seq: Sequences,
         actions: &[u8],
         old_logp: &[f32],
         adv: &[f32],
         cfg: PpoActorConfig,
     ) -> Result<ActorLossStats, PolicyError> {
-        self.ppo_grads_part(obs, t, b, h0, masks, actions, old_logp, adv, cfg, t * b)
+        self.ppo_grads_biased(seq, actions, old_logp, adv, &[], cfg)
     }
 
-    /// [`ppo_grads`](Self::ppo_grads) for one part of a mini-batch of `total_rows` rows:
-    /// losses, statistics and gradients are this part's share of the mean over all rows,
-    /// so calling it on every part (gradients accumulate) gives the mini-batch's gradient
-    /// with only one part's activations held at a time.
-    #[allow(clippy::too_many_arguments)]
-    pub fn ppo_grads_part(
+    /// [`ppo_grads`](Self::ppo_grads) with `logit_bias` (T*B*n_actions entries, or empty
+    /// for none) added to the logits before the softmax: the action shield's masks, so
+    /// that the update scores actions under the distribution the rollout sampled from.
+    pub fn ppo_grads_biased(
         &mut self,
-        obs: &ObsBatch,
-        t: usize,
-        b: usize,
-        h0: &[f32],
-        masks: &[f32],
-        actions: &[u8],
-        old_logp: &[f32],
-        adv: &[f32],
-        cfg: PpoActorConfig,
-        total_rows: usize,
-    ) -> Result<ActorLossStats, PolicyError> {
-        self.ppo_grads_part_biased(
-            obs,
-            t,
-            b,
-            h0,
-            masks,
-            actions,
-            old_logp,
-            adv,
-            &[],
-            cfg,
-            total_rows,
-        )
-    }
-
-    /// [`ppo_grads_part`](Self::ppo_grads_part) with `logit_bias` (T*B*n_actions entries,
-    /// or empty for none) added to the logits before the softmax: the action shield's
-    /// masks, so that the update scores actions under the distribution the rollout
-    /// sampled from.
-    #[allow(clippy::too_many_arguments)]
-    pub fn ppo_grads_part_biased(
-        &mut self,
-        obs: &ObsBatch,
-        t: usize,
-        b: usize,
-        h0: &[f32],
-        masks: &[f32],
+        seq: Sequences,
         actions: &[u8],
         old_logp: &[f32],
         adv: &[f32],
         logit_bias: &[f32],
         cfg: PpoActorConfig,
-        total_rows: usize,
     ) -> Result<ActorLossStats, PolicyError> {
-        let n = t * b;
+        let n = seq.rows();
         if !logit_bias.is_empty() {
             check_len("logit_bias", logit_bias.len(), n * self.arch.n_actions)?;
         }
@@ -347,12 +304,12 @@ impl Actor {
                 expected: k,
             });
         }
-        self.forward_seq(obs, t, b, h0, masks)?;
+        self.forward_seq(seq.obs, seq.t, seq.b, seq.h0, seq.masks)?;
         let c = &mut self.cache;
         let logp = sized(&mut c.logp, n * k);
         let dl = sized(&mut c.dlogits, n * k);
         let mut st = ActorLossStats::default();
-        let inv = 1.0 / total_rows.max(1) as f32;
+        let inv = 1.0 / seq.total_rows.max(1) as f32;
         let mut biased = Vec::with_capacity(if logit_bias.is_empty() { 0 } else { k });
         for r in 0..n {
             let lp = &mut logp[r * k..(r + 1) * k];

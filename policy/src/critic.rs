@@ -22,6 +22,7 @@ use crate::nn::{
     clip_grad_norm, sized, tanh, Adam, AdamConfig, Init, Kv, LayerNorm, LayerNormConfig, Linear,
     LinearConfig, MhaCache, MhaConfig, MultiHeadAttention, ParamStore, Slot,
 };
+use crate::sequences::Sequences;
 use obs::{FlatLayout, ObsBatch};
 use rand::{Rng, SeedableRng};
 
@@ -185,7 +186,6 @@ impl Critic {
     }
 
     /// Values for T*B rows (B = envs * n robots per env); see the module doc for the layout.
-    #[allow(clippy::too_many_arguments)]
     pub fn forward_seq(
         &mut self,
         obs: &ObsBatch,
@@ -373,49 +373,26 @@ impl Critic {
         }
     }
 
-    /// Forward + MAPPO clipped Huber value loss + backward (gradients accumulate).
+    /// Forward + MAPPO clipped Huber value loss + backward (gradients accumulate), `n`
+    /// robots per environment (a part of a mini-batch holds whole environments).
     /// `old_values` and `returns` have T*B entries (already normalised if a value
-    /// normaliser is used).
-    #[allow(clippy::too_many_arguments)]
+    /// normaliser is used); loss, statistics and gradients are these rows' share of the
+    /// mean over `seq.total_rows`.
     pub fn value_grads(
         &mut self,
-        obs: &ObsBatch,
-        t: usize,
-        b: usize,
+        seq: Sequences,
         n: usize,
-        h0: &[f32],
-        masks: &[f32],
         old_values: &[f32],
         returns: &[f32],
         cfg: ValueLossConfig,
     ) -> Result<ValueLossStats, PolicyError> {
-        self.value_grads_part(obs, t, b, n, h0, masks, old_values, returns, cfg, t * b)
-    }
-
-    /// [`value_grads`](Self::value_grads) for one part of a mini-batch of `total_rows`
-    /// rows (whole environments per part): loss, statistics and gradients are this part's
-    /// share of the mean over all rows.
-    #[allow(clippy::too_many_arguments)]
-    pub fn value_grads_part(
-        &mut self,
-        obs: &ObsBatch,
-        t: usize,
-        b: usize,
-        n: usize,
-        h0: &[f32],
-        masks: &[f32],
-        old_values: &[f32],
-        returns: &[f32],
-        cfg: ValueLossConfig,
-        total_rows: usize,
-    ) -> Result<ValueLossStats, PolicyError> {
-        let rows = t * b;
+        let rows = seq.rows();
         check_len("old_values", old_values.len(), rows)?;
         check_len("returns", returns.len(), rows)?;
-        self.forward_seq(obs, t, b, n, h0, masks)?;
+        self.forward_seq(seq.obs, seq.t, seq.b, n, seq.h0, seq.masks)?;
         let c = &mut self.cache;
         let dv = sized(&mut c.dv, rows);
-        let inv = 1.0 / total_rows.max(1) as f32;
+        let inv = 1.0 / seq.total_rows.max(1) as f32;
         let mut st = ValueLossStats::default();
         for r in 0..rows {
             let v = c.head.y[r];

@@ -3,8 +3,8 @@
 //!
 //! - [`nn`]: layers (Linear, LayerNorm, Tanh, ReLU, one-query multi-head attention, GRU,
 //!   categorical head, Adam, gradient clipping) over a flat [`nn::ParamStore`];
-//! - [`Actor`] / [`Critic`]: training networks (chunk forward/backward, PPO losses,
-//!   rollout steps);
+//! - [`Actor`] / [`Critic`]: training networks (chunk forward/backward, PPO losses over
+//!   [`Sequences`], rollout steps);
 //! - [`Policy`]: what `robot_node` loads; [`checkpoint`]: safetensors files.
 
 pub mod actor;
@@ -18,6 +18,7 @@ pub mod head;
 pub mod inference;
 pub mod mlp_base;
 pub mod nn;
+pub mod sequences;
 #[cfg(feature = "train")]
 pub mod train;
 
@@ -27,6 +28,7 @@ pub use config::{ActionSpace, ArchConfig, FlatLayoutConfig, ModelKind};
 pub use critic::{Critic, ValueLossConfig, ValueLossStats};
 pub use error::PolicyError;
 pub use inference::{ActMode, Policy, PolicyState};
+pub use sequences::Sequences;
 
 #[cfg(test)]
 mod net_tests;

@@ -2,7 +2,7 @@
 //! compute the same function.
 
 use crate::nn::gradcheck::{assert_grad_close, assert_grad_close_scaled, numeric_grad, rand_vec};
-use crate::{Actor, ArchConfig, Critic, ModelKind, PpoActorConfig, ValueLossConfig};
+use crate::{Actor, ArchConfig, Critic, ModelKind, PpoActorConfig, Sequences, ValueLossConfig};
 use obs::{Counts, FlatLayout, ObsBatch};
 use rand::{Rng, SeedableRng};
 
@@ -295,6 +295,7 @@ fn ppo_training_drives_losses_down() {
         let masks = vec![1.0; t * b];
         let actions: Vec<u8> = (0..t * b).map(|r| (r % 5) as u8).collect();
         let adv = vec![1.0; t * b];
+        let seq = Sequences::new(&obs, t, b, &h0, &masks);
         let logp_of = |a: &mut Actor| -> Vec<f32> {
             let y = a.forward_seq(&obs, t, b, &h0, &masks).unwrap().to_vec();
             (0..t * b)
@@ -310,17 +311,7 @@ fn ppo_training_drives_losses_down() {
             let old = logp_of(&mut actor);
             for _ in 0..4 {
                 actor
-                    .ppo_grads(
-                        &obs,
-                        t,
-                        b,
-                        &h0,
-                        &masks,
-                        &actions,
-                        &old,
-                        &adv,
-                        PpoActorConfig::default(),
-                    )
+                    .ppo_grads(seq, &actions, &old, &adv, PpoActorConfig::default())
                     .unwrap();
                 actor.step(10.0);
             }
@@ -343,9 +334,7 @@ fn ppo_training_drives_losses_down() {
                 .forward_seq(&obs, t, b, n, &h0, &masks)
                 .unwrap()
                 .to_vec();
-            let st = critic
-                .value_grads(&obs, t, b, n, &h0, &masks, &old, &target, cfg)
-                .unwrap();
+            let st = critic.value_grads(seq, n, &old, &target, cfg).unwrap();
             critic.step(10.0);
             first.get_or_insert(st.value_loss);
             last = st.value_loss;
@@ -376,10 +365,9 @@ fn ppo_gradient_matches_finite_differences_of_the_loss() {
         })
         .collect();
     let cfg = PpoActorConfig::default();
+    let seq = Sequences::new(&obs, t, b, &h0, &masks);
     actor.params.zero_grad();
-    let st = actor
-        .ppo_grads(&obs, t, b, &h0, &masks, &actions, &old, &adv, cfg)
-        .unwrap();
+    let st = actor.ppo_grads(seq, &actions, &old, &adv, cfg).unwrap();
     assert!(st.clip_frac > 0.0 && st.clip_frac < 1.0);
     let analytic = actor.params.grad.clone();
     let mut probe = actor.clone();
@@ -387,7 +375,7 @@ fn ppo_gradient_matches_finite_differences_of_the_loss() {
         probe.params.data.copy_from_slice(p);
         probe.params.zero_grad();
         probe
-            .ppo_grads(&obs, t, b, &h0, &masks, &actions, &old, &adv, cfg)
+            .ppo_grads(seq, &actions, &old, &adv, cfg)
             .unwrap()
             .loss as f64
     });
@@ -408,22 +396,11 @@ fn ppo_logit_bias_masks_actions_and_zero_bias_is_neutral() {
     let adv = [1.0, -0.5, 2.0, 0.3];
     let old = [-1.6f32; 4];
     let cfg = PpoActorConfig::default();
+    let seq = Sequences::new(&obs, t, b, &h0, &masks);
     let run = |a: &mut Actor, bias: &[f32]| {
         a.params.zero_grad();
         let st = a
-            .ppo_grads_part_biased(
-                &obs,
-                t,
-                b,
-                &h0,
-                &masks,
-                &actions,
-                &old,
-                &adv,
-                bias,
-                cfg,
-                t * b,
-            )
+            .ppo_grads_biased(seq, &actions, &old, &adv, bias, cfg)
             .unwrap();
         (st, a.params.grad.clone())
     };
@@ -442,6 +419,6 @@ fn ppo_logit_bias_masks_actions_and_zero_bias_is_neutral() {
     assert_ne!(g2, g0);
     // A wrong bias length is refused.
     assert!(actor
-        .ppo_grads_part_biased(&obs, t, b, &h0, &masks, &actions, &old, &adv, &[0.0; 3], cfg, 4)
+        .ppo_grads_biased(seq, &actions, &old, &adv, &[0.0; 3], cfg)
         .is_err());
 }

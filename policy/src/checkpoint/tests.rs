@@ -3,7 +3,7 @@
 
 use super::*;
 use crate::net_tests::{rand_obs, small_arch};
-use crate::{ActMode, Policy};
+use crate::{ActMode, Policy, Sequences};
 use obs::Counts;
 
 fn tmp(name: &str) -> PathBuf {
@@ -189,12 +189,9 @@ fn trainer_state_resumes_exactly() {
     let train = |a: &mut Actor, c: &mut Critic, steps: usize| {
         for _ in 0..steps {
             let old = vec![-1.6; 4];
+            let seq = Sequences::new(&obs, 2, 2, &h0, &masks);
             a.ppo_grads(
-                &obs,
-                2,
-                2,
-                &h0,
-                &masks,
+                seq,
                 &[0, 1, 2, 3],
                 &old,
                 &[1.0, -1.0, 0.5, 2.0],
@@ -202,18 +199,8 @@ fn trainer_state_resumes_exactly() {
             )
             .unwrap();
             a.step(10.0);
-            c.value_grads(
-                &obs,
-                2,
-                2,
-                2,
-                &h0,
-                &masks,
-                &[0.0; 4],
-                &[1.0; 4],
-                Default::default(),
-            )
-            .unwrap();
+            c.value_grads(seq, 2, &[0.0; 4], &[1.0; 4], Default::default())
+                .unwrap();
             c.step(10.0);
         }
     };

@@ -3,7 +3,7 @@
 
 use super::memory::part_rows_for;
 use super::{mix, TrainError, Trainer, UpdateStats};
-use crate::{PpoActorConfig, ValueLossConfig};
+use crate::{PpoActorConfig, Sequences, ValueLossConfig};
 use obs::ObsBatch;
 use rand::seq::SliceRandom;
 use rand::SeedableRng;
@@ -159,32 +159,21 @@ impl Trainer {
                         mb.ret.iter_mut().for_each(|r| *r = vn.normalize(*r));
                     }
                     let (actor, critic, mb) = (&mut self.actor, &mut self.critic, &self.mb);
+                    let seq = Sequences::new(&mb.obs, l, bu, &mb.ha, &mb.masks);
+                    let seq = seq.part_of(mb_rows);
                     let (ra, rc) = rayon::join(
                         || {
                             if !train_actor {
                                 return Ok(None);
                             }
+                            let (acts, logp, adv) = (&mb.actions, &mb.logp, &mb.adv);
                             actor
-                                .ppo_grads_part_biased(
-                                    &mb.obs,
-                                    l,
-                                    bu,
-                                    &mb.ha,
-                                    &mb.masks,
-                                    &mb.actions,
-                                    &mb.logp,
-                                    &mb.adv,
-                                    &mb.shield,
-                                    pcfg,
-                                    mb_rows,
-                                )
+                                .ppo_grads_biased(seq, acts, logp, adv, &mb.shield, pcfg)
                                 .map(Some)
                         },
                         || {
-                            critic.value_grads_part(
-                                &mb.obs, l, bu, n, &mb.hc, &mb.masks, &mb.values, &mb.ret, vcfg,
-                                mb_rows,
-                            )
+                            let seq = seq.with_h0(&mb.hc);
+                            critic.value_grads(seq, n, &mb.values, &mb.ret, vcfg)
                         },
                     );
                     let (sa, sc) = (ra?, rc?);
