@@ -269,7 +269,16 @@ impl DataFrag {
       _ => {}
     }
 
+    // With the security feature the payload here may still be encoded (payload
+    // protection adds a crypto header and footer to every fragment run, so an
+    // encrypted run is longer than fragmentsInSubmessage x fragmentSize). The
+    // length check then belongs after decoding, where
+    // `MessageReceiver::decode_and_handle_datafrag` makes it. Checking here dropped
+    // every fragmented sample that arrived inside an encrypted SEC_BODY (metadata
+    // protection), and reliable writers resent them without end.
+    #[cfg(not(feature = "security"))]
     let max_payload_bytes = (count_u32 as usize) * (fragment_size as usize);
+    #[cfg(not(feature = "security"))]
     if datafrag.serialized_payload.len() > max_payload_bytes {
       return Err(io::Error::new(
         io::ErrorKind::InvalidData,
@@ -369,6 +378,7 @@ mod tests {
   }
 
   #[test]
+  #[cfg(not(feature = "security"))]
   fn deserialize_rejects_oversized_payload_for_fragment_run() {
     let df = DataFrag {
       writer_sn: SequenceNumber::new(1),
@@ -381,6 +391,28 @@ mod tests {
     };
     let bytes = serialize_body(&df);
     assert!(DataFrag::deserialize(&bytes, BitFlags::<DATAFRAG_Flags>::empty()).is_err());
+  }
+
+  // An encrypted fragment run (crypto header + ciphertext + footer) is longer than
+  // fragmentsInSubmessage x fragmentSize; it must survive deserialization so that
+  // the receiver can decode it and check the decoded length.
+  #[test]
+  #[cfg(feature = "security")]
+  fn deserialize_keeps_an_encoded_run_longer_than_its_fragments() {
+    let df = DataFrag {
+      writer_sn: SequenceNumber::new(1),
+      fragment_starting_num: FragmentNumber::new(1),
+      fragments_in_submessage: 5,
+      fragment_size: 256,
+      data_size: 1500,
+      serialized_payload: Bytes::from(vec![7u8; 5 * 256 + 44]),
+      ..Default::default()
+    };
+    let bytes = serialize_body(&df);
+    let little_endian = BitFlags::<DATAFRAG_Flags>::from_endianness(Endianness::LittleEndian);
+    let back = DataFrag::deserialize(&bytes, little_endian).expect("an encoded run deserializes");
+    assert_eq!(back.serialized_payload.len(), 5 * 256 + 44);
+    assert_eq!(back.fragments_in_submessage, 5);
   }
 
   #[test]
