@@ -340,16 +340,30 @@ impl SecureDiscovery {
         }
       }
       Some(AuthenticationStatus::Authenticating) => {
-        // We are authenticating.
-        // If we need to send this remote participant a handshake request but haven't
-        // managed to do so, retry
-        if let Some(DiscHandshakeState::PendingRequestSend) = self.get_handshake_state(&guid_prefix)
-        {
-          self.try_sending_new_handshake_request_message(
-            guid_prefix,
-            discovery_db,
-            auth_msg_writer,
-          );
+        // We are authenticating, and the remote is still announcing itself.
+        match self.get_handshake_state(&guid_prefix) {
+          // We need to send this remote participant a handshake request but haven't
+          // managed to do so: retry.
+          Some(DiscHandshakeState::PendingRequestSend) => {
+            self.try_sending_new_handshake_request_message(
+              guid_prefix,
+              discovery_db,
+              auth_msg_writer,
+            );
+          }
+          // Our request (or reply) went unanswered through every resend. Under load at
+          // start-up, with many participants handshaking at once, a best-effort
+          // handshake message can be lost that often; giving up would leave this live
+          // remote out for good. Re-arm the resends while it keeps announcing itself.
+          Some(DiscHandshakeState::PendingReplyMessage | DiscHandshakeState::PendingFinalMessage)
+            if self.stored_authentication_messages.get(&guid_prefix).is_some_and(
+              |m| m.remaining_resend_counter == 0,
+            ) =>
+          {
+            info!("Handshake with {guid_prefix:?} went unanswered; resending again");
+            self.reset_stored_message_resend_counter(&guid_prefix);
+          }
+          _ => {}
         }
         info!("Authenticating with Participant {guid_prefix:?}");
         // Otherwise keep the same authentication status
@@ -1516,6 +1530,7 @@ impl SecureDiscovery {
       // from us)
       if self.handshake_states.get(guid_prefix)
         != Some(&DiscHandshakeState::CompletedWithFinalMessageSent)
+        && stored_message.remaining_resend_counter > 0
       {
         match auth_msg_writer.write(stored_message.message.clone(), None) {
           Ok(()) => {
@@ -1535,10 +1550,9 @@ impl SecureDiscovery {
         }
       }
     }
-    // Remove authentication messages with no more resends
-    self
-      .stored_authentication_messages
-      .retain(|_guid_prefix, message| message.remaining_resend_counter > 0);
+    // A message with no resends left stays stored (not resent): if the remote keeps
+    // announcing itself, participant_read re-arms it instead of abandoning the
+    // handshake.
 
     // Then try to send those key exchange messages that we haven't been able to
     // send yet
