@@ -79,7 +79,9 @@ pub struct FleetArgs {
     pub stale_timeout: f64,
     /// Robots hosted per robot_node process (each keeps its own controller and cmd_vel).
     /// Default: one per robot up to 10 processes per core; a larger fleet runs as 2
-    /// processes per core (on 2 cores: 100 robots as 4 processes of 25).
+    /// processes per core (on 2 cores: 100 robots as 4 processes of 25). With --secure, one
+    /// per robot only up to 4 processes per core (secure start-up grows with processes
+    /// squared; on 2 cores 20 robots run as 4 processes of 5).
     #[arg(long)]
     pub robots_per_process: Option<usize>,
     /// Extra `-p NAME:=VALUE` for every robot_node (repeatable; e.g. test_delay_ms:=50).

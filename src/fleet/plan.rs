@@ -117,7 +117,8 @@ impl Plan {
         std::fs::create_dir_all(&log_dir)
             .with_context(|| format!("creating log directory {}", log_dir.display()))?;
         let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
-        let per_process = layout::robots_per_process(setup.robots, cores, a.robots_per_process);
+        let per_process =
+            layout::robots_per_process(setup.robots, cores, a.secure, a.robots_per_process);
         let keystore = if a.secure {
             let root = a
                 .keystore
