@@ -1911,6 +1911,11 @@ impl Writer {
         // datagram unconditionally, deduplicated against everything already sent.
         send_legacy!(self.extra_unicast_destinations);
       }
+      // Keys not exchanged yet with a just-matched remote: expected at start-up, and
+      // what is not sent now is repaired once the keys arrive.
+      Err(e) if e.is_no_remote_endpoint_keys() => {
+        debug!("Not sending to readers yet: {e:?}");
+      }
       Err(e) => error!("Failed to send message to readers. Encoding failed: {e:?}"),
     }
     blocked

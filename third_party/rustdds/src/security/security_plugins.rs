@@ -255,12 +255,13 @@ impl SecurityPlugins {
     self
       .remote_endpoint_crypto_handle_cache
       .get(&local_and_proxy_guid_pair)
-      .ok_or_else(|| {
-        create_security_error_and_log!(
-          "Could not find a remote EndpointCryptoHandle for the (local_endpoint_guid, proxy_guid) \
-           pair {:?}",
-          local_and_proxy_guid_pair
-        )
+      // Not logged here: right after a match this is expected (keys not exchanged yet);
+      // the caller decides how loud to be.
+      .ok_or_else(|| SecurityError {
+        msg: format!(
+          "{NO_REMOTE_ENDPOINT_KEYS} (no remote EndpointCryptoHandle for the \
+           (local_endpoint_guid, proxy_guid) pair {local_and_proxy_guid_pair:?})"
+        ),
       })
       .copied()
   }

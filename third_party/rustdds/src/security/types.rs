@@ -35,6 +35,18 @@ pub struct SecurityError {
   pub(crate) msg: String,
 }
 
+/// Start of the error for a matched remote endpoint whose keys have not been exchanged
+/// yet. Sending to it fails until the key exchange completes, which is expected for a
+/// moment after every match, so senders log it at debug level, not as an error.
+pub(crate) const NO_REMOTE_ENDPOINT_KEYS: &str = "No crypto keys yet for the remote endpoint";
+
+impl SecurityError {
+  /// The remote endpoint is matched but its keys have not been exchanged yet.
+  pub(crate) fn is_no_remote_endpoint_keys(&self) -> bool {
+    self.msg.starts_with(NO_REMOTE_ENDPOINT_KEYS)
+  }
+}
+
 pub fn security_error(msg: &str) -> SecurityError {
   SecurityError {
     msg: msg.to_string(),
