@@ -22,18 +22,20 @@ cargo build --release --locked -j 2 --workspace --bins 2>&1
 echo "== cargo test --workspace --release"
 cargo test --workspace --release --locked -j 2 2>&1
 
-# Vendored rustdds (third_party/, ADR 0005): the start-up deadlock regression tests and the
-# DATA_FRAG tests, with the security feature the fleet builds it with (an encrypted fragment
-# run must survive deserialization). Run from a copy outside the workspace: cargo refuses a
-# nested package that is not a member.
-echo "== cargo test: vendored rustdds, discovery deadlock and DATA_FRAG regressions"
+# Vendored rustdds (third_party/, ADR 0005): the start-up deadlock regression tests, the
+# DATA_FRAG tests (an encrypted fragment run must survive deserialization) and the
+# crypto-handle test (a re-created writer must register), with the security feature the
+# fleet builds it with. Run from a copy outside the workspace: cargo refuses a nested
+# package that is not a member.
+echo "== cargo test: vendored rustdds, discovery deadlock, DATA_FRAG and crypto-handle regressions"
 rdds="$(mktemp -d)"
 cp -r third_party/rustdds/. "$rdds"
 CARGO_TARGET_DIR="$PWD/target/third_party" cargo test --release --locked -j 2 \
     --manifest-path "$rdds/Cargo.toml" --features security --lib -- \
     discovery::discovery::tests::announcing_a_local_writer_holds_no_lock_across_blocking_sends \
     discovery::discovery::tests::the_published_announce_code_path_deadlocks_and_the_test_sees_it \
-    messages::submessages::data_frag::tests 2>&1
+    messages::submessages::data_frag::tests \
+    security::cryptographic::cryptographic_builtin::crypto_key_factory::tests 2>&1
 rm -rf "$rdds"
 
 # Python: rclpy (real ROS 2 Jazzy, Fast DDS, from PyPI wheels) against the release binaries:

@@ -20,54 +20,37 @@ impl CryptographicBuiltin {
     self.crypto_handle_counter
   }
 
-  fn get_or_generate_matched_remote_endpoint_crypto_handle(
+  /// A new handle for a remote endpoint matched to a local one. A remote participant
+  /// can have several endpoints matched to the same local endpoint: when a writer is
+  /// deleted and created again (a robot removed and re-added), the new one is often
+  /// discovered before the old one's removal is processed. One handle per (local
+  /// endpoint, remote participant) made the new writer's registration fail ("already
+  /// associated with receiver-specific encode key materials") and its data could never be
+  /// decoded. Callers register each (local, remote) GUID pair once
+  /// (`SecurityPlugins::has_remote_endpoint_been_registered_already`).
+  fn generate_matched_remote_endpoint_crypto_handle(
     &mut self,
     remote_participant_crypto_handle: ParticipantCryptoHandle,
     local_endpoint_crypto_handle: EndpointCryptoHandle,
   ) -> EndpointCryptoHandle {
-    // If a corresponding handle exists, get and return
-    if let Some(remote_endpoint_crypto_handle) = self
+    let remote_endpoint_crypto_handle = self.generate_crypto_handle();
+    // Associate it with the remote participant
+    self.endpoint_to_participant.insert(
+      remote_endpoint_crypto_handle,
+      remote_participant_crypto_handle,
+    );
+    // Associate it with the local endpoint
+    self
+      .matched_local_endpoint
+      .insert(remote_endpoint_crypto_handle, local_endpoint_crypto_handle);
+    self
       .matched_remote_endpoint
-      .get(&local_endpoint_crypto_handle)
-      .and_then(|remote_participant_to_remote_endpoint| {
-        remote_participant_to_remote_endpoint.get(&remote_participant_crypto_handle)
-      })
-    {
-      *remote_endpoint_crypto_handle
-    } else {
-      // Otherwise generate a new handle
-      let remote_endpoint_crypto_handle = self.generate_crypto_handle();
-      // Associate it with the remote participant
-      self.endpoint_to_participant.insert(
-        remote_endpoint_crypto_handle,
-        remote_participant_crypto_handle,
-      );
-      // Associate it with the local endpoint
-      self
-        .matched_local_endpoint
-        .insert(remote_endpoint_crypto_handle, local_endpoint_crypto_handle);
-      // Insert it to the HashMap corresponding to the local endpoint
-      if let Some(remote_participant_to_remote_endpoint) = self
-        .matched_remote_endpoint
-        .get_mut(&local_endpoint_crypto_handle)
-      {
-        remote_participant_to_remote_endpoint.insert(
-          remote_participant_crypto_handle,
-          remote_endpoint_crypto_handle,
-        );
-      } else {
-        // Create a new HashMap if one does not yet exist
-        self.matched_remote_endpoint.insert(
-          local_endpoint_crypto_handle,
-          HashMap::from([(
-            remote_participant_crypto_handle,
-            remote_endpoint_crypto_handle,
-          )]),
-        );
-      }
-      // Return the generated handle
-      remote_endpoint_crypto_handle
-    }
+      .entry(local_endpoint_crypto_handle)
+      .or_default()
+      .entry(remote_participant_crypto_handle)
+      .or_default()
+      .push(remote_endpoint_crypto_handle);
+    remote_endpoint_crypto_handle
   }
 
   fn is_volatile(properties: &[Property]) -> bool {
@@ -250,7 +233,14 @@ impl CryptographicBuiltin {
           .matched_remote_endpoint
           .get_mut(&matched_local_endpoint_crypto_handle)
         {
-          remote_participant_to_remote_endpoint.remove(&participant_crypto_handle);
+          if let Some(handles) =
+            remote_participant_to_remote_endpoint.get_mut(&participant_crypto_handle)
+          {
+            handles.retain(|h| *h != endpoint_crypto_handle);
+            if handles.is_empty() {
+              remote_participant_to_remote_endpoint.remove(&participant_crypto_handle);
+            }
+          }
         }
       }
       // If the endpoint is local, unregister all associated remote entities as they serve no
@@ -258,7 +248,7 @@ impl CryptographicBuiltin {
       else if let Some(remote_participant_to_remote_endpoint) =
         self.matched_remote_endpoint.remove(&endpoint_crypto_handle)
       {
-        for remote_endpoint_crypto_handle in remote_participant_to_remote_endpoint.values() {
+        for remote_endpoint_crypto_handle in remote_participant_to_remote_endpoint.values().flatten() {
           self.unregister_endpoint(EndpointInfo {
             crypto_handle: *remote_endpoint_crypto_handle,
             kind: endpoint_info.kind.opposite(),
@@ -439,10 +429,9 @@ impl CryptoKeyFactory for CryptographicBuiltin {
       .get_common_encode_key_materials(&local_datawriter_crypto_handle)
       .cloned()?;
 
-    // Find a handle for the remote datareader corresponding to the (remote
-    // participant, local datawriter) pair, or generate a new one
+    // A new handle for this remote datareader (one per matched pair)
     let remote_datareader_crypto_handle = self
-      .get_or_generate_matched_remote_endpoint_crypto_handle(
+      .generate_matched_remote_endpoint_crypto_handle(
         remote_participant_crypto_handle,
         local_datawriter_crypto_handle,
       );
@@ -575,10 +564,9 @@ impl CryptoKeyFactory for CryptographicBuiltin {
       .get_common_encode_key_materials(&local_datareader_crypto_handle)
       .cloned()?;
 
-    // Find a handle for the remote datawriter corresponding to the (remote
-    // participant, local datareader) pair, or generate a new one
+    // A new handle for this remote datawriter (one per matched pair)
     let remote_datawriter_crypto_handle: DatareaderCryptoHandle = self
-      .get_or_generate_matched_remote_endpoint_crypto_handle(
+      .generate_matched_remote_endpoint_crypto_handle(
         remote_participant_crypto_handle,
         local_datareader_crypto_handle,
       );
@@ -696,5 +684,74 @@ impl CryptoKeyFactory for CryptographicBuiltin {
       kind: EndpointKind::DataReader,
     });
     Ok(())
+  }
+}
+
+#[cfg(test)]
+mod tests {
+  use super::*;
+  use crate::security::authentication::{Challenge, SharedSecret, SharedSecretHandle};
+
+  fn participant_attributes() -> ParticipantSecurityAttributes {
+    let mut a = ParticipantSecurityAttributes::empty();
+    a.plugin_participant_attributes = BuiltinPluginParticipantSecurityAttributes {
+      is_rtps_encrypted: false,
+      is_discovery_encrypted: true,
+      is_liveliness_encrypted: true,
+      is_rtps_origin_authenticated: false,
+      is_discovery_origin_authenticated: false,
+      is_liveliness_origin_authenticated: false,
+    }
+    .into();
+    a
+  }
+
+  fn encrypted_endpoint() -> EndpointSecurityAttributes {
+    let mut a = EndpointSecurityAttributes::empty();
+    a.is_submessage_protected = true;
+    a.is_payload_protected = true;
+    a.plugin_endpoint_attributes = BuiltinPluginEndpointSecurityAttributes {
+      is_submessage_encrypted: true,
+      is_submessage_origin_authenticated: false,
+      is_payload_encrypted: true,
+    }
+    .into();
+    a
+  }
+
+  fn secret() -> SharedSecretHandle {
+    SharedSecretHandle {
+      shared_secret: SharedSecret::dummy(),
+      challenge1: Challenge::dummy(),
+      challenge2: Challenge::dummy(),
+    }
+  }
+
+  // A writer deleted and created again (a robot removed and re-added) is often
+  // discovered before the old one's removal is processed: both are matched to the
+  // same local reader at once, and the new one must be registered too.
+  #[test]
+  fn two_writers_of_one_participant_on_one_reader_both_register() {
+    let mut c = CryptographicBuiltin::new();
+    let local = c
+      .register_local_participant(1, 1, &[], participant_attributes())
+      .unwrap();
+    let remote = c
+      .register_matched_remote_participant(local, 2, 2, secret())
+      .unwrap();
+    let reader = c
+      .register_local_datareader(local, &[], encrypted_endpoint())
+      .unwrap();
+    let old = c
+      .register_matched_remote_datawriter(reader, remote, secret())
+      .expect("the first writer registers");
+    let new = c
+      .register_matched_remote_datawriter(reader, remote, secret())
+      .expect("a second writer of the same participant registers");
+    assert_ne!(old, new);
+    // The old one's removal leaves the new one's keys in place.
+    c.unregister_datawriter(old).unwrap();
+    assert!(c.get_receiver_specific_encode_key_materials(&new).is_ok());
+    assert!(c.get_receiver_specific_encode_key_materials(&old).is_err());
   }
 }
