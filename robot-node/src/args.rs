@@ -1,24 +1,15 @@
-//! ROS 2 command-line conventions, parsed here because ros2-client parses none:
-//!
-//! ```text
-//! robot_node [--ros-args [-r|--remap __ns:=/robot_3] [-r __node:=name]
-//!                        [-p|--param name:=value]... [--params-file f.yaml]...
-//!                        [--log-level LEVEL] [--enclave E]
-//!                        [--enable-rosout-logs|--disable-rosout-logs|--disable-stdout-logs]
-//!                        [--] ]
-//! ```
-//!
-//! Parameter files use the ROS 2 YAML form `<node>: ros__parameters: {...}` where the key
-//! may be the node name, its fully qualified name, or a pattern with `*` (one segment)
-//! and `**` (any segments), e.g. `/**:`; nested namespace keys are joined with `/`.
-//! Files apply in order, then `-p` overrides. `ROS_DOMAIN_ID` comes from the environment.
+//! `robot_node` parameters, from the ROS 2 command-line conventions (`ros::args`).
 
 use std::path::PathBuf;
 
-pub use ros::args::{
-    key_matches, load_params_file, parse_params_yaml, parse_ros_args, ArgError, ParamValue,
+use ros::args::{
+    boolean, non_negative, num, optional_path, param_error, parse_params, positive, rate_hz,
+    timeout_s,
 };
-use ros::args::{num, positive};
+pub use ros::args::{
+    key_matches, load_params_file, parse_params_yaml, parse_ros_args, ArgError, NodeArgs,
+    ParamValue,
+};
 
 /// Default node name.
 pub const DEFAULT_NODE_NAME: &str = "robot_node";
@@ -26,12 +17,9 @@ pub const DEFAULT_NODE_NAME: &str = "robot_node";
 /// Everything the node is configured with.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Params {
-    /// Namespace with leading slash, e.g. `/robot_3` (this robot's identity).
-    pub namespace: String,
-    pub node_name: String,
-    pub domain_id: u16,
-    /// `--enclave`: the DDS Security enclave, used when `ROS_SECURITY_ENABLE=true`.
-    pub enclave: Option<String>,
+    /// Namespace (e.g. `/robot_3`: this robot's identity), node name, domain, log level,
+    /// `--enclave` (the DDS Security enclave, used when `ROS_SECURITY_ENABLE=true`).
+    pub node: NodeArgs,
     /// Checkpoint of the learned policy; `None` = scripted greedy controller.
     pub policy: Option<PathBuf>,
     /// `greedy`, `greedy-orca` or `policy`; default: `policy` if a policy path is given,
@@ -62,9 +50,6 @@ pub struct Params {
     pub stats_period_s: f64,
     /// Period of topic discovery scans.
     pub discovery_period_s: f64,
-    /// `--log-level`, if given (tracing filter directive).
-    pub log_level: Option<String>,
-    pub enable_rosout: bool,
     /// Body sizes the greedy controller plans with (the fleet's; the launcher passes the
     /// simulator's values for the setup). Defaults: the unscaled base sizes.
     pub robot_radius: f64,
@@ -103,10 +88,7 @@ pub enum ControllerKind {
 impl Default for Params {
     fn default() -> Self {
         Self {
-            namespace: "/".into(),
-            node_name: DEFAULT_NODE_NAME.into(),
-            domain_id: 0,
-            enclave: None,
+            node: NodeArgs::new(DEFAULT_NODE_NAME),
             policy: None,
             controller: ControllerKind::Greedy,
             shield: false,
@@ -121,8 +103,6 @@ impl Default for Params {
             room_margin: msgs::validate::DEFAULT_MARGIN,
             stats_period_s: 10.0,
             discovery_period_s: 0.5,
-            log_level: None,
-            enable_rosout: true,
             robot_radius: 0.08,
             machine_half: [0.12, 0.12],
             storage_half: [0.15, 0.08],
@@ -137,16 +117,9 @@ impl Default for Params {
 }
 
 impl Params {
-    pub fn fully_qualified_name(&self) -> String {
-        if self.namespace == "/" {
-            format!("/{}", self.node_name)
-        } else {
-            format!("{}/{}", self.namespace, self.node_name)
-        }
-    }
     /// Robot identity used by the topic contract (`robot_3`).
     pub fn robot_id(&self) -> String {
-        self.namespace.trim_matches('/').to_string()
+        self.node.namespace.trim_matches('/').to_string()
     }
 }
 
@@ -171,26 +144,12 @@ where
     I: IntoIterator<Item = S>,
     S: AsRef<str>,
 {
-    let ra = parse_ros_args(args, ros_domain_id, DEFAULT_NODE_NAME)?;
-    let mut p = Params {
-        namespace: ra.namespace,
-        node_name: ra.node_name,
-        domain_id: ra.domain_id,
-        enclave: ra.enclave,
-        log_level: ra.log_level,
-        enable_rosout: ra.enable_rosout,
+    let init = |node| Params {
+        node,
         ..Params::default()
     };
-    let mut warnings = Vec::new();
-    let mut set: Vec<String> = Vec::new();
-    for (name, value, origin) in ra.values {
-        match apply_param(&mut p, &name, &value)? {
-            Applied::Yes => set.push(name),
-            Applied::Unknown => {
-                warnings.push(format!("unknown parameter `{name}` ({origin}) ignored"))
-            }
-        }
-    }
+    let (mut p, set, warnings) =
+        parse_params(args, ros_domain_id, DEFAULT_NODE_NAME, init, apply_param)?;
     let was_set = |n: &str| set.iter().any(|s| s == n);
     if p.lockstep {
         p.use_sim_time = true;
@@ -205,97 +164,39 @@ where
     Ok((p, warnings))
 }
 
-enum Applied {
-    Yes,
-    Unknown,
-}
-
-fn apply_param(p: &mut Params, name: &str, v: &ParamValue) -> Result<Applied, ArgError> {
+/// Set parameter `name`; false if it is not one of `robot_node`'s.
+fn apply_param(p: &mut Params, name: &str, v: &ParamValue) -> Result<bool, ArgError> {
     match name {
-        "policy" => match v {
-            ParamValue::Str(s) if s.is_empty() => p.policy = None,
-            ParamValue::Str(s) => p.policy = Some(PathBuf::from(s)),
-            other => {
-                return Err(ArgError::Param {
-                    name: name.into(),
-                    msg: format!("expected a path, got {other:?}"),
-                })
-            }
-        },
+        "policy" => p.policy = optional_path(name, v, "path")?,
         "controller" => {
             p.controller = match v {
                 ParamValue::Str(s) if s == "greedy" => ControllerKind::Greedy,
                 ParamValue::Str(s) if s == "greedy-orca" => ControllerKind::GreedyOrca,
                 ParamValue::Str(s) if s == "policy" => ControllerKind::Policy,
                 other => {
-                    return Err(ArgError::Param {
-                        name: name.into(),
-                        msg: format!("expected `greedy`, `greedy-orca` or `policy`, got {other:?}"),
-                    })
+                    return Err(param_error(
+                        name,
+                        format!("expected `greedy`, `greedy-orca` or `policy`, got {other:?}"),
+                    ))
                 }
             }
         }
-        "shield" => match v {
-            ParamValue::Bool(b) => p.shield = *b,
-            other => {
-                return Err(ArgError::Param {
-                    name: name.into(),
-                    msg: format!("expected true or false, got {other:?}"),
-                })
-            }
-        },
-        "orca_filter" => match v {
-            ParamValue::Bool(b) => p.orca_filter = Some(*b),
-            other => {
-                return Err(ArgError::Param {
-                    name: name.into(),
-                    msg: format!("expected true or false, got {other:?}"),
-                })
-            }
-        },
+        "shield" => p.shield = boolean(name, v)?,
+        "orca_filter" => p.orca_filter = Some(boolean(name, v)?),
         "reach" => p.reach = Some(positive(name, v)?),
         "orca_clearance" => p.orca_clearance = positive(name, v)?,
-        "control_rate_hz" => {
-            let hz = positive(name, v)?;
-            if hz > 1000.0 {
-                return Err(ArgError::Param {
-                    name: name.into(),
-                    msg: format!("{hz} Hz is above the 1000 Hz limit"),
-                });
-            }
-            p.control_rate_hz = hz;
-        }
-        "use_sim_time" => match v {
-            ParamValue::Bool(b) => p.use_sim_time = *b,
-            other => {
-                return Err(ArgError::Param {
-                    name: name.into(),
-                    msg: format!("expected true or false, got {other:?}"),
-                })
-            }
-        },
+        "control_rate_hz" => p.control_rate_hz = rate_hz(name, v)?,
+        "use_sim_time" => p.use_sim_time = boolean(name, v)?,
         "k_speed" => p.k_speed = positive(name, v)?,
         "stale_timeout_s" => p.stale_timeout_s = positive(name, v)?,
         "static_stale_timeout_s" => {
             let x = num(name, v)?;
             if !x.is_finite() {
-                return Err(ArgError::Param {
-                    name: name.into(),
-                    msg: "must be finite".into(),
-                });
+                return Err(param_error(name, "must be finite"));
             }
             p.static_stale_timeout_s = x;
         }
-        "room_margin" => {
-            let x = num(name, v)?;
-            if !(x.is_finite() && x >= 0.0) {
-                return Err(ArgError::Param {
-                    name: name.into(),
-                    msg: format!("must be a finite number >= 0, got {x}"),
-                });
-            }
-            p.room_margin = x;
-        }
+        "room_margin" => p.room_margin = non_negative(name, v)?,
         "stats_period_s" => p.stats_period_s = positive(name, v)?,
         "robot_radius" => p.robot_radius = positive(name, v)?,
         "machine_half_x" => p.machine_half[0] = positive(name, v)?,
@@ -303,52 +204,20 @@ fn apply_param(p: &mut Params, name: &str, v: &ParamValue) -> Result<Applied, Ar
         "storage_half_x" => p.storage_half[0] = positive(name, v)?,
         "storage_half_y" => p.storage_half[1] = positive(name, v)?,
         "lockstep_wait_s" => p.lockstep_wait_s = positive(name, v)?,
-        "lockstep" => match v {
-            ParamValue::Bool(b) => p.lockstep = *b,
-            other => {
-                return Err(ArgError::Param {
-                    name: name.into(),
-                    msg: format!("expected true or false, got {other:?}"),
-                })
-            }
-        },
+        "lockstep" => p.lockstep = boolean(name, v)?,
         "discovery_period_s" => p.discovery_period_s = positive(name, v)?,
         "robots" => p.robots = parse_robots(name, v)?,
-        "startup_timeout_s" => p.startup_timeout_s = non_negative(name, v)?,
-        "stall_timeout_s" => p.stall_timeout_s = non_negative(name, v)?,
-        "stats_json" => match v {
-            ParamValue::Bool(b) => p.stats_json = *b,
-            other => {
-                return Err(ArgError::Param {
-                    name: name.into(),
-                    msg: format!("expected true or false, got {other:?}"),
-                })
-            }
-        },
-        _ => return Ok(Applied::Unknown),
+        "startup_timeout_s" => p.startup_timeout_s = timeout_s(name, v)?,
+        "stall_timeout_s" => p.stall_timeout_s = timeout_s(name, v)?,
+        "stats_json" => p.stats_json = boolean(name, v)?,
+        _ => return Ok(false),
     }
-    Ok(Applied::Yes)
-}
-
-/// A finite number of seconds >= 0 (0: disabled).
-fn non_negative(name: &str, v: &ParamValue) -> Result<f64, ArgError> {
-    let x = num(name, v)?;
-    if x.is_finite() && x >= 0.0 {
-        Ok(x)
-    } else {
-        Err(ArgError::Param {
-            name: name.into(),
-            msg: format!("must be a finite number of seconds >= 0 (0 disables), got {x}"),
-        })
-    }
+    Ok(true)
 }
 
 /// `robot_0,robot_3` or the range form `robot_0..5` (= robot_0 .. robot_5).
 fn parse_robots(name: &str, v: &ParamValue) -> Result<Vec<String>, ArgError> {
-    let bad = |msg: String| ArgError::Param {
-        name: name.into(),
-        msg,
-    };
+    let bad = |msg: String| param_error(name, msg);
     let s = match v {
         ParamValue::Str(s) => s.clone(),
         other => return Err(bad(format!("expected robot ids, got {other:?}"))),
@@ -397,7 +266,7 @@ mod tests {
     fn defaults() {
         let p = parse_ok(&[]);
         assert_eq!(p, Params::default());
-        assert_eq!(p.fully_qualified_name(), "/robot_node");
+        assert_eq!(p.node.fully_qualified_name(), "/robot_node");
     }
 
     #[test]
@@ -469,10 +338,10 @@ mod tests {
             "-p",
             "stale_timeout_s:=2",
         ]);
-        assert_eq!(p.namespace, "/robot_3");
+        assert_eq!(p.node.namespace, "/robot_3");
         assert_eq!(p.robot_id(), "robot_3");
-        assert_eq!(p.node_name, "brain");
-        assert_eq!(p.fully_qualified_name(), "/robot_3/brain");
+        assert_eq!(p.node.node_name, "brain");
+        assert_eq!(p.node.fully_qualified_name(), "/robot_3/brain");
         assert_eq!(
             p.policy.as_deref(),
             Some(std::path::Path::new("/tmp/p.safetensors"))
@@ -497,12 +366,12 @@ mod tests {
             "WARN",
             "--",
         ]);
-        assert_eq!(p.namespace, "/r1");
-        assert_eq!(p.log_level.as_deref(), Some("warn"));
+        assert_eq!(p.node.namespace, "/r1");
+        assert_eq!(p.node.log_level.as_deref(), Some("warn"));
         assert_eq!(p.controller, ControllerKind::Greedy);
         // remap aimed at another node is not ours
         let p = parse_ok(&["--ros-args", "-r", "other:__ns:=/x"]);
-        assert_eq!(p.namespace, "/");
+        assert_eq!(p.node.namespace, "/");
     }
 
     #[test]
@@ -536,9 +405,13 @@ mod tests {
     #[test]
     fn domain_id_from_env() {
         let (p, _) = parse(Vec::<String>::new(), Some("42")).unwrap();
-        assert_eq!(p.domain_id, 42);
+        assert_eq!(p.node.domain_id, 42);
         assert_eq!(
-            parse(Vec::<String>::new(), Some("")).unwrap().0.domain_id,
+            parse(Vec::<String>::new(), Some(""))
+                .unwrap()
+                .0
+                .node
+                .domain_id,
             0
         );
         assert!(matches!(

@@ -193,20 +193,20 @@ impl<'a> EventLoop<'a> {
         let who = if self.multi {
             format!(
                 "{} hosting {} robots ({} .. {})",
-                p.fully_qualified_name(),
+                p.node.fully_qualified_name(),
                 self.hosted.len(),
                 self.hosted[0].me,
                 self.hosted[self.hosted.len() - 1].me
             )
         } else {
-            p.fully_qualified_name()
+            p.node.fully_qualified_name()
         };
         rosout!(
             self.log,
             LogLevel::Info,
             "robot_node {} up: domain {}, controller {}, {} Hz ({}), k_speed {} m/s, stale {} s / static {} s",
             who,
-            p.domain_id,
+            p.node.domain_id,
             self.hosted[0].brain.controller.name(),
             p.control_rate_hz,
             if p.use_sim_time { "sim time from /clock" } else { "wall clock" },

@@ -20,7 +20,7 @@ fn main() {
         }
     };
 
-    ros::init_tracing(params.log_level.as_deref());
+    ros::init_tracing(params.node.log_level.as_deref());
     for w in &warnings {
         tracing::warn!("{w}");
     }

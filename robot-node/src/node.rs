@@ -17,7 +17,7 @@ use anyhow::{anyhow, Context as _};
 use ros2_client::dds::Context;
 use tracing::{info, warn};
 
-use ros::{NodeSpec, RosNode};
+use ros::RosNode;
 
 use crate::args::{ControllerKind, Params};
 use crate::controller::{Controller, GreedyController, GreedyOrcaController, PolicyController};
@@ -130,7 +130,7 @@ pub fn run_watched(p: &Params, stop: &AtomicBool, wd: &Watchdog) -> anyhow::Resu
     for name in names {
         let (controller, k_speed) = if multi {
             let mut q = p.clone();
-            q.namespace = format!("/{name}");
+            q.node.namespace = format!("/{name}");
             q.robots = Vec::new();
             make_controller(&q).with_context(|| format!("robot {name}"))?
         } else {
@@ -140,7 +140,7 @@ pub fn run_watched(p: &Params, stop: &AtomicBool, wd: &Watchdog) -> anyhow::Resu
         wd.beat(); // start-up progress
     }
     wd.stage(NodeStage::Context);
-    let ctx = ros::context(p.domain_id, p.enclave.as_deref())?;
+    let ctx = ros::context(p.node.domain_id, p.node.enclave.as_deref())?;
     if multi {
         info!(
             "{} robots in one process: one reader per topic, shared",
@@ -197,11 +197,7 @@ fn run_on(
     } else {
         format!("spin-{}", p.robot_id())
     };
-    let spec = NodeSpec {
-        namespace: &p.namespace,
-        name: &p.node_name,
-        enable_rosout: p.enable_rosout,
-    };
+    let spec = p.node.spec();
     let mut ros = retry("node", stop, wd, || RosNode::start(ctx, &spec, &spin_name))?;
     let result = crate::event_loop::run(p, stop, ctx, ros.node(), robots, multi, wd);
     wd.stage(NodeStage::Done);

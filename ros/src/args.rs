@@ -13,26 +13,47 @@
 //! may be the node name, its fully qualified name, or a pattern with `*` (one segment)
 //! and `**` (any segments), e.g. `/**:`; nested namespace keys are joined with `/`.
 //! Files apply in order, then `-p` overrides. `ROS_DOMAIN_ID` comes from the environment.
+//!
+//! Each node's parameters hold a [`NodeArgs`] and apply the rest ([`parse_params`]) with
+//! the typed readers ([`positive`], [`boolean`], [`timeout_s`], ...), so the two
+//! nodes accept and refuse values alike.
 
-/// The node identity and raw parameters of one command line.
-#[derive(Debug, Clone, PartialEq, Default)]
-pub struct RosArgs {
+/// The node identity of one command line: what every node's parameters start with.
+#[derive(Debug, Clone, PartialEq)]
+pub struct NodeArgs {
     /// Namespace with leading slash (`/` when none).
     pub namespace: String,
     pub node_name: String,
-    /// The node's built-in name (`-r robot_node:__ns:=...` remaps target it too).
-    pub default_node_name: String,
     pub domain_id: u16,
     /// `--log-level`, if given (tracing filter directive).
     pub log_level: Option<String>,
     pub enable_rosout: bool,
     /// `--enclave`, if given: the DDS Security enclave (see [`crate::security`]).
     pub enclave: Option<String>,
-    /// (name, value, origin) in application order: params files, then `-p`.
-    pub values: Vec<(String, ParamValue, String)>,
 }
 
-impl RosArgs {
+impl NodeArgs {
+    /// No arguments: node `node_name` in `/`, domain 0, rosout on.
+    pub fn new(node_name: &str) -> Self {
+        Self {
+            namespace: "/".into(),
+            node_name: node_name.into(),
+            domain_id: 0,
+            log_level: None,
+            enable_rosout: true,
+            enclave: None,
+        }
+    }
+
+    /// What [`crate::node`] creates the node from.
+    pub fn spec(&self) -> crate::NodeSpec<'_> {
+        crate::NodeSpec {
+            namespace: &self.namespace,
+            name: &self.node_name,
+            enable_rosout: self.enable_rosout,
+        }
+    }
+
     pub fn fully_qualified_name(&self) -> String {
         if self.namespace == "/" {
             format!("/{}", self.node_name)
@@ -40,6 +61,54 @@ impl RosArgs {
             format!("{}/{}", self.namespace, self.node_name)
         }
     }
+}
+
+/// The node identity and raw parameters of one command line.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RosArgs {
+    pub node: NodeArgs,
+    /// The node's built-in name (`-r robot_node:__ns:=...` remaps target it too).
+    pub default_node_name: String,
+    /// (name, value, origin) in application order: params files, then `-p`.
+    pub values: Vec<(String, ParamValue, String)>,
+}
+
+/// Parse a node's command line (see [`parse_ros_args`]) into its parameters `P`: `init`
+/// makes them from the node identity, `apply` sets one parameter and returns whether it
+/// knows the name. Returns the parameters, the names set (in order) and a warning per
+/// unknown name.
+pub fn parse_params<P, I, S>(
+    args: I,
+    ros_domain_id: Option<&str>,
+    default_node_name: &str,
+    init: impl FnOnce(NodeArgs) -> P,
+    mut apply: impl FnMut(&mut P, &str, &ParamValue) -> Result<bool, ArgError>,
+) -> Result<(P, Vec<String>, Vec<String>), ArgError>
+where
+    I: IntoIterator<Item = S>,
+    S: AsRef<str>,
+{
+    let ra = parse_ros_args(args, ros_domain_id, default_node_name)?;
+    let mut p = init(ra.node);
+    let (set, warnings) = apply_values(ra.values, |name, v| apply(&mut p, name, v))?;
+    Ok((p, set, warnings))
+}
+
+/// Apply [`RosArgs::values`] in order with `apply`, which returns whether it knows the
+/// name. Returns the names applied and a warning per unknown name.
+pub fn apply_values(
+    values: Vec<(String, ParamValue, String)>,
+    mut apply: impl FnMut(&str, &ParamValue) -> Result<bool, ArgError>,
+) -> Result<(Vec<String>, Vec<String>), ArgError> {
+    let (mut set, mut warnings) = (Vec::new(), Vec::new());
+    for (name, value, origin) in values {
+        if apply(&name, &value)? {
+            set.push(name);
+        } else {
+            warnings.push(format!("unknown parameter `{name}` ({origin}) ignored"));
+        }
+    }
+    Ok((set, warnings))
 }
 
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
@@ -110,16 +179,14 @@ where
 {
     let args: Vec<String> = args.into_iter().map(|s| s.as_ref().to_string()).collect();
     let mut p = RosArgs {
-        enable_rosout: true,
-        namespace: "/".into(),
-        node_name: default_node_name.to_string(),
+        node: NodeArgs::new(default_node_name),
         default_node_name: default_node_name.to_string(),
-        ..RosArgs::default()
+        values: Vec::new(),
     };
     if let Some(d) = ros_domain_id {
         let d = d.trim();
         if !d.is_empty() {
-            p.domain_id = d
+            p.node.domain_id = d
                 .parse::<u16>()
                 .ok()
                 .filter(|v| *v <= 232)
@@ -170,15 +237,15 @@ where
                 "--params-file" => files.push(next(&mut i, a)?),
                 "--log-level" => {
                     let v = next(&mut i, a)?;
-                    p.log_level =
+                    p.node.log_level =
                         Some(ros_log_level_to_filter(&v).ok_or_else(|| ArgError::Bad {
                             arg: format!("--log-level {v}"),
                             msg: "expected debug, info, warn, error or fatal".into(),
                         })?);
                 }
-                "-e" | "--enclave" => p.enclave = Some(next(&mut i, a)?),
-                "--enable-rosout-logs" => p.enable_rosout = true,
-                "--disable-rosout-logs" => p.enable_rosout = false,
+                "-e" | "--enclave" => p.node.enclave = Some(next(&mut i, a)?),
+                "--enable-rosout-logs" => p.node.enable_rosout = true,
+                "--disable-rosout-logs" => p.node.enable_rosout = false,
                 "--enable-stdout-logs"
                 | "--disable-stdout-logs"
                 | "--enable-external-lib-logs"
@@ -193,7 +260,7 @@ where
     // params files first (in order), then -p overrides
     let mut values: Vec<(String, ParamValue, String)> = Vec::new();
     for f in &files {
-        for (n, v) in load_params_file(f, &p.namespace, &p.node_name)? {
+        for (n, v) in load_params_file(f, &p.node.namespace, &p.node.node_name)? {
             values.push((n, v, format!("params file {f}")));
         }
     }
@@ -212,7 +279,7 @@ fn apply_remap(p: &mut RosArgs, v: &str) -> Result<(), ArgError> {
     let (from, to) = v.split_once(":=").ok_or_else(|| bad("expected FROM:=TO"))?;
     // `node_name:__ns:=...` targets one node; we are the only node in this process
     let from = match from.split_once(':') {
-        Some((node, rest)) if node == p.node_name || node == p.default_node_name => rest,
+        Some((node, rest)) if node == p.node.node_name || node == p.default_node_name => rest,
         Some(_) => return Ok(()), // remap for another node: not ours
         None => from,
     };
@@ -230,13 +297,13 @@ fn apply_remap(p: &mut RosArgs, v: &str) -> Result<(), ArgError> {
                     }
                 }
             }
-            p.namespace = ns.to_string();
+            p.node.namespace = ns.to_string();
         }
         "__node" | "__name" => {
             if !valid_token(to) {
                 return Err(bad("invalid node name"));
             }
-            p.node_name = to.to_string();
+            p.node.node_name = to.to_string();
         }
         _ => {
             return Err(bad(
@@ -269,26 +336,94 @@ fn ros_log_level_to_filter(v: &str) -> Option<String> {
     )
 }
 
+/// An [`ArgError::Param`] naming parameter `name`.
+pub fn param_error(name: &str, msg: impl Into<String>) -> ArgError {
+    ArgError::Param {
+        name: name.into(),
+        msg: msg.into(),
+    }
+}
+
 pub fn num(name: &str, v: &ParamValue) -> Result<f64, ArgError> {
     match v {
         ParamValue::Int(i) => Ok(*i as f64),
         ParamValue::Double(d) => Ok(*d),
-        other => Err(ArgError::Param {
-            name: name.into(),
-            msg: format!("expected a number, got {other:?}"),
-        }),
+        other => Err(param_error(
+            name,
+            format!("expected a number, got {other:?}"),
+        )),
+    }
+}
+
+/// A number for which `ok` holds, else an error saying it `must be {what}`.
+fn checked(
+    name: &str,
+    v: &ParamValue,
+    ok: impl Fn(f64) -> bool,
+    what: &str,
+) -> Result<f64, ArgError> {
+    let x = num(name, v)?;
+    if ok(x) {
+        Ok(x)
+    } else {
+        Err(param_error(name, format!("must be {what}, got {x}")))
     }
 }
 
 pub fn positive(name: &str, v: &ParamValue) -> Result<f64, ArgError> {
-    let x = num(name, v)?;
-    if x.is_finite() && x > 0.0 {
-        Ok(x)
-    } else {
-        Err(ArgError::Param {
-            name: name.into(),
-            msg: format!("must be a finite number > 0, got {x}"),
-        })
+    checked(name, v, |x| x.is_finite() && x > 0.0, "a finite number > 0")
+}
+
+pub fn non_negative(name: &str, v: &ParamValue) -> Result<f64, ArgError> {
+    checked(
+        name,
+        v,
+        |x| x.is_finite() && x >= 0.0,
+        "a finite number >= 0",
+    )
+}
+
+/// A watchdog timeout: finite seconds >= 0, 0 disabling it.
+pub fn timeout_s(name: &str, v: &ParamValue) -> Result<f64, ArgError> {
+    let what = "a finite number of seconds >= 0 (0 disables)";
+    checked(name, v, |x| x.is_finite() && x >= 0.0, what)
+}
+
+/// A loop rate: > 0 and at most 1000 Hz.
+pub fn rate_hz(name: &str, v: &ParamValue) -> Result<f64, ArgError> {
+    let hz = positive(name, v)?;
+    if hz > 1000.0 {
+        return Err(param_error(
+            name,
+            format!("{hz} Hz is above the 1000 Hz limit"),
+        ));
+    }
+    Ok(hz)
+}
+
+pub fn boolean(name: &str, v: &ParamValue) -> Result<bool, ArgError> {
+    match v {
+        ParamValue::Bool(b) => Ok(*b),
+        other => Err(param_error(
+            name,
+            format!("expected true or false, got {other:?}"),
+        )),
+    }
+}
+
+/// A path; the empty string is none. `what` names the expected kind in the error.
+pub fn optional_path(
+    name: &str,
+    v: &ParamValue,
+    what: &str,
+) -> Result<Option<std::path::PathBuf>, ArgError> {
+    match v {
+        ParamValue::Str(s) if s.is_empty() => Ok(None),
+        ParamValue::Str(s) => Ok(Some(s.into())),
+        other => Err(param_error(
+            name,
+            format!("expected a {what}, got {other:?}"),
+        )),
     }
 }
 

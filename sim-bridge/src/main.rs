@@ -18,7 +18,7 @@ fn main() {
             std::process::exit(2);
         }
     };
-    ros::init_tracing(p.log_level.as_deref());
+    ros::init_tracing(p.node.log_level.as_deref());
     for w in &warnings {
         tracing::warn!("{w}");
     }

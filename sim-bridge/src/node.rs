@@ -14,7 +14,7 @@ use msgs::topics::{self, machine, robot, storage, Entity, Leaf};
 use msgs::{
     Bool, Clock, DiagnosticArray, MarkerArray, PoseStamped, Profile, RosMessage, StdString, Twist,
 };
-use ros::{publisher, stamp_key_info, subscription, NodeSpec, RosNode, StampedWriter};
+use ros::{publisher, stamp_key_info, subscription, RosNode, StampedWriter};
 
 use crate::core::{Core, MetricsLine};
 use crate::delay::DelayQueue;
@@ -98,14 +98,9 @@ pub fn run_watched(
     wd.stage(NodeStage::Core);
     let mut core = Core::new(p.clone(), 0.0)?;
     wd.stage(NodeStage::Context);
-    let ctx = ros::context(p.domain_id, p.enclave.as_deref())?;
+    let ctx = ros::context(p.node.domain_id, p.node.enclave.as_deref())?;
     wd.stage(NodeStage::Node);
-    let spec = NodeSpec {
-        namespace: &p.namespace,
-        name: &p.node_name,
-        enable_rosout: p.enable_rosout,
-    };
-    let mut ros = RosNode::start(&ctx, &spec, "ros2-spinner")?;
+    let mut ros = RosNode::start(&ctx, &p.node.spec(), "ros2-spinner")?;
     let r = event_loop(&p, stop, &ctx, ros.node(), &mut core, t0, wd);
     wd.stage(NodeStage::Done);
     drop(ros); // stops the spinner

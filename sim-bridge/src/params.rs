@@ -2,7 +2,10 @@
 
 use std::path::PathBuf;
 
-use ros::args::{num, parse_ros_args, positive, ArgError, ParamValue};
+use ros::args::{
+    boolean, non_negative, optional_path, param_error, parse_params, positive, rate_hz, timeout_s,
+    ArgError, NodeArgs, ParamValue,
+};
 use sim::Setup;
 
 pub const DEFAULT_NODE_NAME: &str = "sim_bridge";
@@ -34,13 +37,9 @@ pub enum Mode {
 
 #[derive(Debug, Clone, PartialEq)]
 pub struct BridgeParams {
-    pub namespace: String,
-    pub node_name: String,
-    pub domain_id: u16,
-    /// `--enclave`: the DDS Security enclave, used when `ROS_SECURITY_ENABLE=true`.
-    pub enclave: Option<String>,
-    pub log_level: Option<String>,
-    pub enable_rosout: bool,
+    /// Namespace, node name, domain, log level, `--enclave` (the DDS Security enclave,
+    /// used when `ROS_SECURITY_ENABLE=true`).
+    pub node: NodeArgs,
     pub setup: Setup,
     pub seed: u64,
     pub mode: Mode,
@@ -79,12 +78,7 @@ pub struct BridgeParams {
 impl Default for BridgeParams {
     fn default() -> Self {
         Self {
-            namespace: "/".into(),
-            node_name: DEFAULT_NODE_NAME.into(),
-            domain_id: 0,
-            enclave: None,
-            log_level: None,
-            enable_rosout: true,
+            node: NodeArgs::new(DEFAULT_NODE_NAME),
             setup: Setup::new(6, 4, 2),
             seed: 0,
             mode: Mode::Realtime,
@@ -108,13 +102,6 @@ impl Default for BridgeParams {
     }
 }
 
-fn bad(name: &str, msg: String) -> ArgError {
-    ArgError::Param {
-        name: name.into(),
-        msg,
-    }
-}
-
 /// Parse the process arguments (without argv\[0\]) and `ROS_DOMAIN_ID`; returns the
 /// parameters and warnings (unknown parameters).
 pub fn parse<I, S>(
@@ -125,121 +112,73 @@ where
     I: IntoIterator<Item = S>,
     S: AsRef<str>,
 {
-    let ra = parse_ros_args(args, ros_domain_id, DEFAULT_NODE_NAME)?;
-    let mut p = BridgeParams {
-        namespace: ra.namespace,
-        node_name: ra.node_name,
-        domain_id: ra.domain_id,
-        enclave: ra.enclave,
-        log_level: ra.log_level,
-        enable_rosout: ra.enable_rosout,
+    let init = |node| BridgeParams {
+        node,
         ..BridgeParams::default()
     };
-    let mut warnings = Vec::new();
-    for (name, v, origin) in ra.values {
-        let n = name.as_str();
-        match n {
-            "setup" => {
-                let s = match &v {
-                    ParamValue::Str(s) => s.clone(),
-                    ParamValue::Double(d) => format!("{d}"),
-                    other => return Err(bad(n, format!("expected N.M_K, got {other:?}"))),
-                };
-                p.setup = s.parse().map_err(|e| bad(n, format!("{e}")))?;
-            }
-            "seed" => match v {
-                ParamValue::Int(i) if i >= 0 => p.seed = i as u64,
-                other => return Err(bad(n, format!("expected an integer >= 0, got {other:?}"))),
-            },
-            "max_steps" => match v {
-                ParamValue::Int(i) if i >= 0 => p.max_steps = i as u64,
-                other => return Err(bad(n, format!("expected an integer >= 0, got {other:?}"))),
-            },
-            "mode" => {
-                p.mode = match &v {
-                    ParamValue::Str(s) if s == "realtime" => Mode::Realtime,
-                    ParamValue::Str(s) if s == "lockstep" => Mode::Lockstep,
-                    other => {
-                        return Err(bad(
-                            n,
-                            format!("expected realtime or lockstep, got {other:?}"),
-                        ))
-                    }
-                }
-            }
-            "rate_hz" => {
-                let hz = positive(n, &v)?;
-                if hz > 1000.0 {
-                    return Err(bad(n, format!("{hz} Hz is above the 1000 Hz limit")));
-                }
-                p.rate_hz = hz;
-            }
-            "stale_timeout_s" => p.stale_timeout_s = positive(n, &v)?,
-            "lockstep_timeout_s" => p.lockstep_timeout_s = positive(n, &v)?,
-            "startup_grace_s" => {
-                let x = num(n, &v)?;
-                if !(x.is_finite() && x >= 0.0) {
-                    return Err(bad(n, format!("must be finite and >= 0, got {x}")));
-                }
-                p.startup_grace_s = x;
-            }
-            "startup_timeout_s" | "stall_timeout_s" => {
-                let x = num(n, &v)?;
-                if !(x.is_finite() && x >= 0.0) {
-                    return Err(bad(
-                        n,
-                        format!("must be a finite number of seconds >= 0 (0 disables), got {x}"),
-                    ));
-                }
-                if n == "startup_timeout_s" {
-                    p.startup_timeout_s = x;
-                } else {
-                    p.stall_timeout_s = x;
-                }
-            }
-            "settle_s" => {
-                let x = num(n, &v)?;
-                if !(x.is_finite() && x >= 0.0) {
-                    return Err(bad(n, format!("must be finite and >= 0, got {x}")));
-                }
-                p.settle_s = x;
-            }
-            "metrics_period_s" => p.metrics_period_s = positive(n, &v)?,
-            "discovery_period_s" => p.discovery_period_s = positive(n, &v)?,
-            "config" => match &v {
-                ParamValue::Str(s) if s.is_empty() => p.config = None,
-                ParamValue::Str(s) => p.config = Some(PathBuf::from(s)),
-                other => return Err(bad(n, format!("expected a path, got {other:?}"))),
-            },
-            "record" => match &v {
-                ParamValue::Str(s) if s.is_empty() => p.record = None,
-                ParamValue::Str(s) => p.record = Some(PathBuf::from(s)),
-                other => return Err(bad(n, format!("expected a directory, got {other:?}"))),
-            },
-            "test_cmd_delay_ms" | "test_state_delay_ms" => {
-                let x = num(n, &v)?;
-                if !(x.is_finite() && (0.0..=10_000.0).contains(&x)) {
-                    return Err(bad(n, format!("must be in [0, 10000] ms, got {x}")));
-                }
-                if n == "test_cmd_delay_ms" {
-                    p.test_cmd_delay_ms = x;
-                } else {
-                    p.test_state_delay_ms = x;
-                }
-            }
-            "stdin_commands" => match v {
-                ParamValue::Bool(b) => p.stdin_commands = b,
-                other => return Err(bad(n, format!("expected true or false, got {other:?}"))),
-            },
-            "spawn_initial" => match v {
-                ParamValue::Bool(b) => p.spawn_initial = b,
-                other => return Err(bad(n, format!("expected true or false, got {other:?}"))),
-            },
-            "use_sim_time" => {} // the bridge is the clock
-            _ => warnings.push(format!("unknown parameter `{name}` ({origin}) ignored")),
-        }
-    }
+    let (p, _, warnings) = parse_params(args, ros_domain_id, DEFAULT_NODE_NAME, init, apply_param)?;
     Ok((p, warnings))
+}
+
+/// Set parameter `name`; false if it is not one of `sim_bridge`'s.
+fn apply_param(p: &mut BridgeParams, n: &str, v: &ParamValue) -> Result<bool, ArgError> {
+    let bad = |msg: String| param_error(n, msg);
+    match n {
+        "setup" => {
+            let s = match v {
+                ParamValue::Str(s) => s.clone(),
+                ParamValue::Double(d) => format!("{d}"),
+                other => return Err(bad(format!("expected N.M_K, got {other:?}"))),
+            };
+            p.setup = s.parse().map_err(|e| bad(format!("{e}")))?;
+        }
+        "seed" => p.seed = non_negative_int(n, v)?,
+        "max_steps" => p.max_steps = non_negative_int(n, v)?,
+        "mode" => {
+            p.mode = match v {
+                ParamValue::Str(s) if s == "realtime" => Mode::Realtime,
+                ParamValue::Str(s) if s == "lockstep" => Mode::Lockstep,
+                other => return Err(bad(format!("expected realtime or lockstep, got {other:?}"))),
+            }
+        }
+        "rate_hz" => p.rate_hz = rate_hz(n, v)?,
+        "stale_timeout_s" => p.stale_timeout_s = positive(n, v)?,
+        "lockstep_timeout_s" => p.lockstep_timeout_s = positive(n, v)?,
+        "startup_grace_s" => p.startup_grace_s = non_negative(n, v)?,
+        "startup_timeout_s" => p.startup_timeout_s = timeout_s(n, v)?,
+        "stall_timeout_s" => p.stall_timeout_s = timeout_s(n, v)?,
+        "settle_s" => p.settle_s = non_negative(n, v)?,
+        "metrics_period_s" => p.metrics_period_s = positive(n, v)?,
+        "discovery_period_s" => p.discovery_period_s = positive(n, v)?,
+        "config" => p.config = optional_path(n, v, "path")?,
+        "record" => p.record = optional_path(n, v, "directory")?,
+        "test_cmd_delay_ms" => p.test_cmd_delay_ms = delay_ms(n, v)?,
+        "test_state_delay_ms" => p.test_state_delay_ms = delay_ms(n, v)?,
+        "stdin_commands" => p.stdin_commands = boolean(n, v)?,
+        "spawn_initial" => p.spawn_initial = boolean(n, v)?,
+        "use_sim_time" => {} // the bridge is the clock
+        _ => return Ok(false),
+    }
+    Ok(true)
+}
+
+fn non_negative_int(n: &str, v: &ParamValue) -> Result<u64, ArgError> {
+    match v {
+        ParamValue::Int(i) if *i >= 0 => Ok(*i as u64),
+        other => Err(param_error(
+            n,
+            format!("expected an integer >= 0, got {other:?}"),
+        )),
+    }
+}
+
+/// A fault-injection delay: [0, 10000] ms.
+fn delay_ms(n: &str, v: &ParamValue) -> Result<f64, ArgError> {
+    let x = ros::args::num(n, v)?;
+    if !(x.is_finite() && (0.0..=10_000.0).contains(&x)) {
+        return Err(param_error(n, format!("must be in [0, 10000] ms, got {x}")));
+    }
+    Ok(x)
 }
 
 #[cfg(test)]
@@ -282,7 +221,7 @@ mod tests {
         assert_eq!(p.stale_timeout_s, 1.5);
         assert!(!p.spawn_initial);
         assert_eq!(p.max_steps, 200);
-        assert_eq!(p.domain_id, 7);
+        assert_eq!(p.node.domain_id, 7);
         assert_eq!(p.test_state_delay_ms, 50.0);
         assert_eq!(p.test_cmd_delay_ms, 200.5);
         assert_eq!(w.len(), 1);
