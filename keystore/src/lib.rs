@@ -32,15 +32,7 @@ use time::{Duration, OffsetDateTime};
 
 pub use policy::{Grant, Role};
 
-/// The files an enclave directory must hold (rmw_dds_common's required set).
-pub const ENCLAVE_FILES: [&str; 6] = [
-    "identity_ca.cert.pem",
-    "cert.pem",
-    "key.pem",
-    "permissions_ca.cert.pem",
-    "governance.p7s",
-    "permissions.p7s",
-];
+pub use msgs::enclave::FILES as ENCLAVE_FILES;
 
 /// How long a new identity and its permissions are valid (SROS2 uses ten years).
 pub const DEFAULT_VALIDITY_DAYS: i64 = 3650;
@@ -174,9 +166,7 @@ impl Keystore {
 
     /// The directory of enclave `name` (`/tending/robot_3` -> `enclaves/tending/robot_3`).
     pub fn enclave_dir(&self, name: &str) -> PathBuf {
-        self.root
-            .join("enclaves")
-            .join(name.trim_start_matches('/'))
+        msgs::enclave::dir(&self.root, name)
     }
 
     /// The CA as rcgen signs with it (params rebuilt from the stored certificate; only its

@@ -1,11 +1,13 @@
 //! ROS 2 wire contract of `tending` (see DESIGN.md): serde mirrors of the standard
 //! `common_interfaces` messages, their type names and `ros2msg` schema text, CDR helpers,
-//! topic names and QoS profiles, stamp keys, and input validation. The node runtime that
+//! topic names and QoS profiles, stamp keys, input validation, and the SROS2 keystore
+//! layout ([`enclave`]). The node runtime that
 //! puts them on DDS is the `ros` crate.
 //!
 //! Only standard types cross the wire, so stock ROS 2 tools read everything.
 
 pub mod cdr;
+pub mod enclave;
 pub mod qos;
 pub mod schema;
 pub mod stamp;

@@ -20,6 +20,20 @@ pub struct GreedyParams {
     pub dt: f32,
 }
 
+impl Default for GreedyParams {
+    /// The default scenario's at scale 1 (sim's `SizeConfig`, `TaskConfig` and `dt`
+    /// defaults; `sim::baselines` tests that they agree).
+    fn default() -> Self {
+        Self {
+            robot_radius: 0.08,
+            machine_half: [0.12, 0.12],
+            storage_half: [0.15, 0.08],
+            k_speed: 0.5,
+            dt: 0.1,
+        }
+    }
+}
+
 const MOVES: [[f32; 2]; 5] = [[0.0, 0.0], [-1.0, 0.0], [1.0, 0.0], [0.0, -1.0], [0.0, 1.0]];
 
 /// The box a greedy robot heads for, relative to the robot.

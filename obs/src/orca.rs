@@ -369,17 +369,7 @@ mod tests {
     use super::*;
 
     fn params() -> OrcaParams {
-        OrcaParams::new(
-            GreedyParams {
-                robot_radius: 0.08,
-                machine_half: [0.12, 0.12],
-                storage_half: [0.15, 0.08],
-                k_speed: 0.5,
-                dt: 0.1,
-            },
-            2.3,
-            0.08,
-        )
+        OrcaParams::new(GreedyParams::default(), 2.3, 0.08)
     }
 
     #[test]

@@ -143,9 +143,7 @@ mod tests {
         GreedyParams {
             robot_radius: 0.05,
             machine_half: [0.1, 0.1],
-            storage_half: [0.15, 0.08],
-            k_speed: 0.5,
-            dt: 0.1,
+            ..GreedyParams::default()
         }
     }
 

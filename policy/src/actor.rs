@@ -7,7 +7,7 @@ use crate::encoder::{EncoderCache, SmappoEncoder};
 use crate::error::{check_len, PolicyError};
 use crate::head::{HeadCache, RecurrentHead};
 use crate::mlp_base::{MlpBase, MlpCache};
-use crate::nn::{categorical, clip_grad_norm, sized, Adam, AdamConfig, ParamStore};
+use crate::nn::{categorical, sized, Adam, AdamConfig, ParamStore};
 use crate::sequences::Sequences;
 use obs::{FlatLayout, ObsBatch, ObsError};
 use rand::SeedableRng;
@@ -349,12 +349,8 @@ impl Actor {
         Ok(st)
     }
 
-    /// Clip the global gradient norm to `max_grad_norm` (MAPPO: 10), Adam step, zero grads.
-    /// Returns the gradient norm before clipping.
+    /// [`Adam::step_clipped`] of the parameters; returns the pre-clip gradient norm.
     pub fn step(&mut self, max_grad_norm: f32) -> f32 {
-        let norm = clip_grad_norm(&mut self.params.grad, max_grad_norm);
-        self.opt.step(&mut self.params.data, &self.params.grad);
-        self.params.zero_grad();
-        norm
+        self.opt.step_clipped(&mut self.params, max_grad_norm)
     }
 }

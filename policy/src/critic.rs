@@ -19,8 +19,8 @@ use crate::factored_input::FactoredRows;
 use crate::head::{HeadCache, RecurrentHead};
 use crate::mlp_base::{MlpBase, MlpCache};
 use crate::nn::{
-    clip_grad_norm, sized, tanh, Adam, AdamConfig, Init, Kv, LayerNorm, LayerNormConfig, Linear,
-    LinearConfig, MhaCache, MhaConfig, MultiHeadAttention, ParamStore, Slot,
+    sized, tanh, Adam, AdamConfig, Init, Kv, LayerNorm, LayerNormConfig, Linear, LinearConfig,
+    MhaCache, MhaConfig, MultiHeadAttention, ParamStore, Slot,
 };
 use crate::sequences::Sequences;
 use obs::{FlatLayout, ObsBatch};
@@ -417,11 +417,8 @@ impl Critic {
         Ok(st)
     }
 
-    /// Clip the global gradient norm, Adam step, zero grads. Returns the pre-clip norm.
+    /// [`Adam::step_clipped`] of the parameters; returns the pre-clip gradient norm.
     pub fn step(&mut self, max_grad_norm: f32) -> f32 {
-        let norm = clip_grad_norm(&mut self.params.grad, max_grad_norm);
-        self.opt.step(&mut self.params.data, &self.params.grad);
-        self.params.zero_grad();
-        norm
+        self.opt.step_clipped(&mut self.params, max_grad_norm)
     }
 }

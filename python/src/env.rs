@@ -1,8 +1,8 @@
 //! [`Sim`]: one environment for Python.
 
 use crate::body_id;
+use crate::greedy::greedy_actions;
 use crate::greedy::greedy_params;
-use crate::greedy::greedy_rows;
 use crate::metrics_dict;
 use crate::parse_config;
 use crate::parse_setup;
@@ -11,7 +11,6 @@ use crate::render::render_rgb;
 use crate::sim_err;
 use crate::spaces::n_actions;
 use crate::spaces::obs_arrays;
-use crate::spaces::obs_inputs;
 use crate::spaces::read_actions;
 use crate::spaces::ObsArrays;
 use crate::SimError;
@@ -25,10 +24,6 @@ use numpy::PyReadonlyArrayDyn;
 use numpy::PyUntypedArrayMethods;
 use obs::FlatLayout;
 use obs::ObsBatch;
-use obs::MACHINE_DIM;
-use obs::PEER_DIM;
-use obs::SELF_DIM;
-use obs::STORAGE_DIM;
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
@@ -198,25 +193,9 @@ impl Sim {
         storages: &Bound<'py, PyAny>,
         peers: &Bound<'py, PyAny>,
     ) -> PyResult<Bound<'py, PyArray1<u8>>> {
-        let n = self.env.n_robots();
-        let c = self.env.obs_counts();
-        let [o, m, s, p] = obs_inputs(
-            [own, machines, storages, peers],
-            [
-                n * SELF_DIM,
-                n * c.machines * MACHINE_DIM,
-                n * c.storages * STORAGE_DIM,
-                n * c.peers * PEER_DIM,
-            ],
-        )?;
-        let mut out = vec![0u8; n];
-        greedy_rows(
-            &greedy_params(&self.env),
-            c,
-            n,
-            [o.as_slice()?, m.as_slice()?, s.as_slice()?, p.as_slice()?],
-            &mut out,
-        );
+        let (n, c) = (self.env.n_robots(), self.env.obs_counts());
+        let arrays = [own, machines, storages, peers];
+        let out = greedy_actions(py, &greedy_params(&self.env), c, 1, n, arrays)?;
         Ok(out.into_pyarray(py))
     }
 

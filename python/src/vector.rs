@@ -1,14 +1,13 @@
 //! [`VecSim`]: many environments stepped together on rayon, the GIL released.
 
+use crate::greedy::greedy_actions;
 use crate::greedy::greedy_params;
-use crate::greedy::greedy_rows;
 use crate::metrics_dict;
 use crate::parse_config;
 use crate::parse_setup;
 use crate::sim_err;
 use crate::spaces::n_actions;
 use crate::spaces::obs_arrays;
-use crate::spaces::obs_inputs;
 use crate::spaces::read_actions;
 use crate::spaces::ObsArrays;
 use numpy::ndarray::Array2;
@@ -286,38 +285,8 @@ impl VecSim {
         peers: &Bound<'py, PyAny>,
     ) -> PyResult<Bound<'py, PyArray2<u8>>> {
         let (e_n, n, c) = (self.envs.len(), self.n, self.counts);
-        let w = [
-            n * SELF_DIM,
-            n * c.machines * MACHINE_DIM,
-            n * c.storages * STORAGE_DIM,
-            n * c.peers * PEER_DIM,
-        ];
-        let [o, m, s, p] = obs_inputs(
-            [own, machines, storages, peers],
-            [e_n * w[0], e_n * w[1], e_n * w[2], e_n * w[3]],
-        )?;
-        let (o, m, s, p) = (o.as_slice()?, m.as_slice()?, s.as_slice()?, p.as_slice()?);
-        let mut out = vec![0u8; e_n * n];
-        let params = greedy_params(&self.envs[0]);
-        py.allow_threads(|| {
-            out.par_chunks_mut(n).enumerate().for_each(|(e, out)| {
-                fn sl(x: &[f32], w: usize, e: usize) -> &[f32] {
-                    &x[e * w..(e + 1) * w]
-                }
-                greedy_rows(
-                    &params,
-                    c,
-                    n,
-                    [
-                        sl(o, w[0], e),
-                        sl(m, w[1], e),
-                        sl(s, w[2], e),
-                        sl(p, w[3], e),
-                    ],
-                    out,
-                );
-            })
-        });
+        let arrays = [own, machines, storages, peers];
+        let out = greedy_actions(py, &greedy_params(&self.envs[0]), c, e_n, n, arrays)?;
         let a = Array2::from_shape_vec((e_n, n), out)
             .map_err(|e| PyValueError::new_err(e.to_string()))?;
         Ok(a.into_pyarray(py))

@@ -349,11 +349,8 @@ pub(crate) mod tests {
     /// Greedy parameters of the default scenario (also used by the tick and fan-out tests).
     pub(crate) fn params(k: f32) -> GreedyParams {
         GreedyParams {
-            robot_radius: 0.08,
-            machine_half: [0.12, 0.12],
-            storage_half: [0.15, 0.08],
             k_speed: k,
-            dt: 0.1,
+            ..GreedyParams::default()
         }
     }
 

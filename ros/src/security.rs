@@ -90,16 +90,7 @@ pub enum SecurityError {
     BadName(String),
 }
 
-/// The files an enclave directory must hold (rmw_dds_common's required set); `crl.pem`
-/// is optional.
-pub const ENCLAVE_FILES: [&str; 6] = [
-    "identity_ca.cert.pem",
-    "cert.pem",
-    "key.pem",
-    "permissions_ca.cert.pem",
-    "governance.p7s",
-    "permissions.p7s",
-];
+pub use msgs::enclave::FILES as ENCLAVE_FILES;
 
 fn valid_enclave(name: &str) -> bool {
     name == "/"
@@ -142,9 +133,7 @@ pub fn resolve(
     let Some(keystore) = env.keystore.as_deref().filter(|s| !s.is_empty()) else {
         return fallback(SecurityError::NoKeystore, Box::new(warn));
     };
-    let dir = Path::new(keystore)
-        .join("enclaves")
-        .join(enclave.trim_start_matches('/'));
+    let dir = msgs::enclave::dir(Path::new(keystore), &enclave);
     if !dir.is_dir() {
         let err = SecurityError::NoEnclave {
             enclave,

@@ -180,13 +180,15 @@ mod tests {
     use super::*;
 
     fn params() -> GreedyParams {
-        GreedyParams {
-            robot_radius: 0.08,
-            machine_half: [0.12, 0.12],
-            storage_half: [0.15, 0.08],
-            k_speed: 0.5,
-            dt: 0.1,
-        }
+        GreedyParams::default()
+    }
+
+    #[test]
+    fn default_greedy_params_are_the_default_scenarios() {
+        let cfg = ScenarioConfig::default();
+        let sizes = crate::layout::sizes_for(crate::Setup::new(1, 1, 1), &cfg);
+        assert_eq!(sizes.scale, 1.0);
+        assert_eq!(greedy_params(&sizes, &cfg), GreedyParams::default());
     }
 
     #[test]

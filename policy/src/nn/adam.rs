@@ -60,6 +60,17 @@ impl Adam {
     }
 }
 
+impl Adam {
+    /// One training step of `params`: clip the global gradient norm to `max_grad_norm`
+    /// (MAPPO: 10), Adam step, zero the gradients. Returns the norm before clipping.
+    pub fn step_clipped(&mut self, params: &mut super::ParamStore, max_grad_norm: f32) -> f32 {
+        let norm = clip_grad_norm(&mut params.grad, max_grad_norm);
+        self.step(&mut params.data, &params.grad);
+        params.zero_grad();
+        norm
+    }
+}
+
 /// Scale `grads` so their global L2 norm is at most `max_norm` (torch clip_grad_norm_:
 /// factor max_norm / (norm + 1e-6) when norm > max_norm). Returns the norm before clipping.
 pub fn clip_grad_norm(grads: &mut [f32], max_norm: f32) -> f32 {
