@@ -17,11 +17,77 @@ fn domain(offset: u32) -> u16 {
 }
 
 fn publisher<M: RosMessage>(node: &mut Node, name: &str, profile: Profile) -> Publisher<M> {
+    typed_publisher(node, name, M::type_name(), profile)
+}
+
+/// A publisher of `M` under the message type name `ty` (which may not be `M`'s).
+fn typed_publisher<M: serde::Serialize>(
+    node: &mut Node,
+    name: &str,
+    ty: ros2_client::MessageTypeName,
+    profile: Profile,
+) -> Publisher<M> {
     let qos = profile.qos();
     let topic = node
-        .create_topic(&Name::parse(name).unwrap(), M::type_name(), &qos)
+        .create_topic(&Name::parse(name).unwrap(), ty, &qos)
         .unwrap();
     node.create_publisher(&topic, Some(qos)).unwrap()
+}
+
+fn cmd_subscription(node: &mut Node, name: &str) -> Subscription<Twist> {
+    let qos = Profile::RobotStream.qos();
+    let topic = node
+        .create_topic(&Name::parse(name).unwrap(), Twist::type_name(), &qos)
+        .unwrap();
+    node.create_subscription(&topic, Some(qos)).unwrap()
+}
+
+/// The test's own DDS participant on domain `d`, with one node `/<name>_<pid>`.
+fn test_node(d: u16, name: &str) -> (Context, Node) {
+    let ctx = Context::with_options(ContextOptions::new().domain_id(d)).unwrap();
+    let node = ctx
+        .new_node(
+            NodeName::new("/", &format!("{name}_{}", std::process::id())).unwrap(),
+            NodeOptions::new().enable_rosout(false),
+        )
+        .unwrap();
+    (ctx, node)
+}
+
+/// `robot_node --ros-args <args>` on domain `d`.
+fn robot_node(d: u16, args: &[&str]) -> Command {
+    let mut c = Command::new(env!("CARGO_BIN_EXE_robot_node"));
+    c.arg("--ros-args")
+        .args(args)
+        .env("ROS_DOMAIN_ID", d.to_string());
+    c
+}
+
+/// Send `signal` (`-TERM`, `-INT`) to the child, then wait up to 5 s for its exit,
+/// calling `poll` every `period` meanwhile.
+fn signal_and_wait(
+    child: &mut Kill,
+    signal: &str,
+    period: Duration,
+    mut poll: impl FnMut(),
+) -> std::process::ExitStatus {
+    let st = Command::new("kill")
+        .args([signal, &child.0.id().to_string()])
+        .status()
+        .unwrap();
+    assert!(st.success());
+    let t_kill = Instant::now();
+    loop {
+        poll();
+        if let Some(s) = child.0.try_wait().unwrap() {
+            return s;
+        }
+        assert!(
+            t_kill.elapsed() < Duration::from_secs(5),
+            "robot_node did not exit on {signal}"
+        );
+        std::thread::sleep(period);
+    }
 }
 
 /// A message with the PoseStamped type name but a 1-byte body: must be dropped as undecodable.
@@ -70,117 +136,83 @@ fn bad_argument_exits_2_naming_it() {
     assert!(err.contains("k_speed"), "{err}");
 }
 
-#[test]
-fn commands_toward_machine_then_zero_when_own_pose_stale() {
-    let d = domain(0);
-    let ctx = Context::with_options(ContextOptions::new().domain_id(d)).unwrap();
-    let mut node = ctx
-        .new_node(
-            NodeName::new("/", &format!("test_pub_{}", std::process::id())).unwrap(),
-            NodeOptions::new().enable_rosout(false),
-        )
-        .unwrap();
+/// Publishers of robot_0's world: its own pose and part, a ready machine to its right, a
+/// storage, a peer carrying a part, and garbage on its own pose topic.
+struct World0 {
+    own_pose: Publisher<PoseStamped>,
+    own_part: Publisher<Bool>,
+    m_pose: Publisher<PoseStamped>,
+    m_ready: Publisher<Bool>,
+    s_pose: Publisher<PoseStamped>,
+    peer_pose: Publisher<PoseStamped>,
+    peer_part: Publisher<Bool>,
+    short_pose: Publisher<Short>,
+}
 
-    let own_pose: Publisher<PoseStamped> =
-        publisher(&mut node, "/robot_0/pose", Profile::RobotStream);
-    let own_part: Publisher<Bool> = publisher(&mut node, "/robot_0/has_part", Profile::RobotStream);
-    let m_pose: Publisher<PoseStamped> =
-        publisher(&mut node, "/machine_0/pose", Profile::LatchedPose);
-    let m_ready: Publisher<Bool> =
-        publisher(&mut node, "/machine_0/part_ready", Profile::PartReady);
-    let s_pose: Publisher<PoseStamped> =
-        publisher(&mut node, "/storage_0/pose", Profile::LatchedPose);
-    let peer_pose: Publisher<PoseStamped> =
-        publisher(&mut node, "/robot_5/pose", Profile::RobotStream);
-    let peer_part: Publisher<Bool> =
-        publisher(&mut node, "/robot_5/has_part", Profile::RobotStream);
-    let short_pose: Publisher<Short> = {
-        let qos = Profile::RobotStream.qos();
-        let topic = node
-            .create_topic(
-                &Name::parse("/robot_0/pose").unwrap(),
+impl World0 {
+    fn new(node: &mut Node) -> Self {
+        Self {
+            own_pose: publisher(node, "/robot_0/pose", Profile::RobotStream),
+            own_part: publisher(node, "/robot_0/has_part", Profile::RobotStream),
+            m_pose: publisher(node, "/machine_0/pose", Profile::LatchedPose),
+            m_ready: publisher(node, "/machine_0/part_ready", Profile::PartReady),
+            s_pose: publisher(node, "/storage_0/pose", Profile::LatchedPose),
+            peer_pose: publisher(node, "/robot_5/pose", Profile::RobotStream),
+            peer_part: publisher(node, "/robot_5/has_part", Profile::RobotStream),
+            short_pose: typed_publisher(
+                node,
+                "/robot_0/pose",
                 PoseStamped::type_name(),
-                &qos,
-            )
-            .unwrap();
-        node.create_publisher(&topic, Some(qos)).unwrap()
-    };
-    let cmd_qos = Profile::RobotStream.qos();
-    let cmd_topic = node
-        .create_topic(
-            &Name::parse(&topics::robot("robot_0", Leaf::CmdVel).ros_name()).unwrap(),
-            Twist::type_name(),
-            &cmd_qos,
-        )
-        .unwrap();
-    let cmd: Subscription<Twist> = node.create_subscription(&cmd_topic, Some(cmd_qos)).unwrap();
+                Profile::RobotStream,
+            ),
+        }
+    }
 
-    let log_path = std::env::temp_dir().join(format!("robot_node_it_{}.log", std::process::id()));
-    let log = std::fs::File::create(&log_path).unwrap();
-    let child = Command::new(env!("CARGO_BIN_EXE_robot_node"))
-        .args([
-            "--ros-args",
-            "-r",
-            "__ns:=/robot_0",
-            "-p",
-            "control_rate_hz:=20",
-            "-p",
-            "stale_timeout_s:=1.0",
-            "-p",
-            "k_speed:=0.5",
-            "-p",
-            "discovery_period_s:=0.2",
-        ])
-        .env("ROS_DOMAIN_ID", d.to_string())
-        .env("RUST_LOG", "info,rustdds=warn,ros2_client=warn")
-        .stdout(Stdio::null())
-        .stderr(log)
-        .spawn()
-        .unwrap();
-    let mut child = Kill(child);
-    let show_log = || std::fs::read_to_string(&log_path).unwrap_or_default();
-
-    let own_alive = Arc::new(AtomicBool::new(true));
-    let running = Arc::new(AtomicBool::new(true));
-    let pub_thread = {
-        let own_alive = own_alive.clone();
-        let running = running.clone();
+    /// Publish at 20 Hz until `running` clears; robot_0's own pose (and the garbage on
+    /// its topic) only while `own_alive` is set.
+    fn spawn(
+        self,
+        own_alive: Arc<AtomicBool>,
+        running: Arc<AtomicBool>,
+    ) -> std::thread::JoinHandle<()> {
         std::thread::spawn(move || {
             let mut i = 0u64;
             while running.load(Ordering::SeqCst) {
                 let st = Time::now();
                 if own_alive.load(Ordering::SeqCst) {
-                    own_pose
+                    self.own_pose
                         .publish(PoseStamped::planar(st, "map", -0.5, -0.5))
                         .ok();
                     if i.is_multiple_of(2) {
                         // garbage that must be dropped, never reach the controller
                         let mut bad = PoseStamped::planar(st, "map", f64::NAN, 0.0);
-                        own_pose.publish(bad.clone()).ok();
+                        self.own_pose.publish(bad.clone()).ok();
                         bad.pose.position.x = 7.0;
-                        own_pose.publish(bad).ok();
-                        short_pose.publish(Short { data: true }).ok();
+                        self.own_pose.publish(bad).ok();
+                        self.short_pose.publish(Short { data: true }).ok();
                     }
                 }
-                own_part.publish(Bool { data: false }).ok();
-                m_pose
+                self.own_part.publish(Bool { data: false }).ok();
+                self.m_pose
                     .publish(PoseStamped::planar(st, "map", 0.5, -0.5))
                     .ok();
-                m_ready.publish(Bool { data: true }).ok();
-                peer_pose
+                self.m_ready.publish(Bool { data: true }).ok();
+                self.peer_pose
                     .publish(PoseStamped::planar(st, "map", 0.9, 0.9))
                     .ok();
-                peer_part.publish(Bool { data: true }).ok();
-                s_pose
+                self.peer_part.publish(Bool { data: true }).ok();
+                self.s_pose
                     .publish(PoseStamped::planar(st, "map", -0.5, 0.8))
                     .ok();
                 i += 1;
                 std::thread::sleep(Duration::from_millis(50));
             }
         })
-    };
+    }
+}
 
-    // Phase 1: a non-zero command toward the machine (+x) arrives.
+/// Phase 1: the first non-zero command toward the machine (+x) within 12 s, and when.
+fn first_command_toward_machine(cmd: &Subscription<Twist>) -> (Option<Twist>, Duration) {
     let t0 = Instant::now();
     let mut got: Option<Twist> = None;
     while t0.elapsed() < Duration::from_secs(12) {
@@ -198,15 +230,12 @@ fn commands_toward_machine_then_zero_when_own_pose_stale() {
         }
         std::thread::sleep(Duration::from_millis(20));
     }
-    let first = t0.elapsed();
-    let t =
-        got.unwrap_or_else(|| panic!("no cmd_vel toward the machine; node log:\n{}", show_log()));
-    assert!((t.linear.x - 0.5).abs() < 1e-9, "{t:?}");
-    assert_eq!(t.linear.y, 0.0);
-    eprintln!("first command toward machine after {first:?}");
+    (got, t0.elapsed())
+}
 
-    // Phase 2: own pose stops; zero velocity follows within the stale timeout (+ slack).
-    own_alive.store(false, Ordering::SeqCst);
+/// Phase 2 (own pose just stopped): how long until a zero command, ignoring the first
+/// 200 ms; None within 5 s.
+fn zero_after_own_pose_stops(cmd: &Subscription<Twist>) -> Option<Duration> {
     let stop_at = Instant::now();
     let mut zero_after: Option<Duration> = None;
     while stop_at.elapsed() < Duration::from_secs(5) {
@@ -223,55 +252,12 @@ fn commands_toward_machine_then_zero_when_own_pose_stale() {
         }
         std::thread::sleep(Duration::from_millis(20));
     }
-    let z = zero_after.unwrap_or_else(|| {
-        panic!(
-            "no zero cmd_vel after own pose stopped; log:\n{}",
-            show_log()
-        )
-    });
-    eprintln!("zero command {z:?} after own pose stopped");
-    assert!(z >= Duration::from_millis(800), "zero too early: {z:?}");
-    assert!(z <= Duration::from_millis(2500), "zero too late: {z:?}");
+    zero_after
+}
 
-    // Phase 3: own pose comes back -> moving again; then SIGTERM -> a zero command and a
-    // clean exit (status 0).
-    own_alive.store(true, Ordering::SeqCst);
-    let back = wait_for(&cmd, Duration::from_secs(5), |t| t.linear.x > 0.4)
-        .unwrap_or_else(|| panic!("no command after own pose returned; log:\n{}", show_log()));
-    eprintln!("moving again {back:?} after own pose returned");
-    running.store(false, Ordering::SeqCst);
-    pub_thread.join().unwrap();
-    let pid = child.0.id();
-    let st = Command::new("kill")
-        .args(["-TERM", &pid.to_string()])
-        .status()
-        .unwrap();
-    assert!(st.success());
-    let t_kill = Instant::now();
-    // read cmd_vel while the node shuts down (samples of a writer that is gone may be
-    // discarded by the reader)
-    let mut last = None;
-    let status = loop {
-        while let Ok(Some((t, _))) = cmd.take() {
-            last = Some(t);
-        }
-        if let Some(s) = child.0.try_wait().unwrap() {
-            break s;
-        }
-        assert!(
-            t_kill.elapsed() < Duration::from_secs(5),
-            "robot_node did not exit on SIGTERM"
-        );
-        std::thread::sleep(Duration::from_millis(5));
-    };
-    let log = show_log();
-    assert!(status.success(), "exit status {status:?}; log:\n{log}");
-    // the last command received is the zero published on shutdown
-    assert_eq!(
-        last,
-        Some(Twist::zero()),
-        "no zero cmd_vel on shutdown; log:\n{log}"
-    );
+/// The node's log reports every kind of dropped input, discovered every topic, and
+/// ended with the final counters.
+fn assert_log_reports_drops_and_discovery(log: &str) {
     assert!(
         log.contains("Decode"),
         "undecodable poses were not reported:\n{log}"
@@ -297,6 +283,92 @@ fn commands_toward_machine_then_zero_when_own_pose_stale() {
         log.contains("OutOfRoom"),
         "out-of-room poses were not reported:\n{log}"
     );
+}
+
+#[test]
+fn commands_toward_machine_then_zero_when_own_pose_stale() {
+    let d = domain(0);
+    let (_ctx, mut node) = test_node(d, "test_pub");
+    let world = World0::new(&mut node);
+    let cmd = cmd_subscription(
+        &mut node,
+        &topics::robot("robot_0", Leaf::CmdVel).ros_name(),
+    );
+
+    let log_path = std::env::temp_dir().join(format!("robot_node_it_{}.log", std::process::id()));
+    let log = std::fs::File::create(&log_path).unwrap();
+    let child = robot_node(
+        d,
+        &[
+            "-r",
+            "__ns:=/robot_0",
+            "-p",
+            "control_rate_hz:=20",
+            "-p",
+            "stale_timeout_s:=1.0",
+            "-p",
+            "k_speed:=0.5",
+            "-p",
+            "discovery_period_s:=0.2",
+        ],
+    )
+    .env("RUST_LOG", "info,rustdds=warn,ros2_client=warn")
+    .stdout(Stdio::null())
+    .stderr(log)
+    .spawn()
+    .unwrap();
+    let mut child = Kill(child);
+    let show_log = || std::fs::read_to_string(&log_path).unwrap_or_default();
+
+    let own_alive = Arc::new(AtomicBool::new(true));
+    let running = Arc::new(AtomicBool::new(true));
+    let pub_thread = world.spawn(own_alive.clone(), running.clone());
+
+    // Phase 1: a non-zero command toward the machine (+x) arrives.
+    let (got, first) = first_command_toward_machine(&cmd);
+    let t =
+        got.unwrap_or_else(|| panic!("no cmd_vel toward the machine; node log:\n{}", show_log()));
+    assert!((t.linear.x - 0.5).abs() < 1e-9, "{t:?}");
+    assert_eq!(t.linear.y, 0.0);
+    eprintln!("first command toward machine after {first:?}");
+
+    // Phase 2: own pose stops; zero velocity follows within the stale timeout (+ slack).
+    own_alive.store(false, Ordering::SeqCst);
+    let z = zero_after_own_pose_stops(&cmd).unwrap_or_else(|| {
+        panic!(
+            "no zero cmd_vel after own pose stopped; log:\n{}",
+            show_log()
+        )
+    });
+    eprintln!("zero command {z:?} after own pose stopped");
+    assert!(z >= Duration::from_millis(800), "zero too early: {z:?}");
+    assert!(z <= Duration::from_millis(2500), "zero too late: {z:?}");
+
+    // Phase 3: own pose comes back -> moving again; then SIGTERM -> a zero command and a
+    // clean exit (status 0).
+    own_alive.store(true, Ordering::SeqCst);
+    let back = wait_for(&cmd, Duration::from_secs(5), |t| t.linear.x > 0.4)
+        .unwrap_or_else(|| panic!("no command after own pose returned; log:\n{}", show_log()));
+    eprintln!("moving again {back:?} after own pose returned");
+    running.store(false, Ordering::SeqCst);
+    pub_thread.join().unwrap();
+    // read cmd_vel while the node shuts down (samples of a writer that is gone may be
+    // discarded by the reader)
+    let mut last = None;
+    let status = signal_and_wait(&mut child, "-TERM", Duration::from_millis(5), || {
+        while let Ok(Some((t, _))) = cmd.take() {
+            last = Some(t);
+        }
+    });
+    let log = show_log();
+    assert!(status.success(), "exit status {status:?}; log:\n{log}");
+    // the last command received is the zero published on shutdown
+    assert_eq!(
+        last,
+        Some(Twist::zero()),
+        "no zero cmd_vel on shutdown; log:\n{log}"
+    );
+    assert_log_reports_drops_and_discovery(&log);
     eprintln!(
         "{}",
         log.lines()
@@ -310,32 +382,18 @@ fn commands_toward_machine_then_zero_when_own_pose_stale() {
 #[test]
 fn sim_time_ticks_follow_clock() {
     let d = domain(101);
-    let ctx = Context::with_options(ContextOptions::new().domain_id(d)).unwrap();
-    let mut node = ctx
-        .new_node(
-            NodeName::new("/", &format!("test_clock_{}", std::process::id())).unwrap(),
-            NodeOptions::new().enable_rosout(false),
-        )
-        .unwrap();
+    let (_ctx, mut node) = test_node(d, "test_clock");
     let clock: Publisher<Clock> = publisher(&mut node, "/clock", Profile::Clock);
     let own_pose: Publisher<PoseStamped> =
         publisher(&mut node, "/robot_1/pose", Profile::RobotStream);
     let own_part: Publisher<Bool> = publisher(&mut node, "/robot_1/has_part", Profile::RobotStream);
     let s_pose: Publisher<PoseStamped> =
         publisher(&mut node, "/storage_3/pose", Profile::LatchedPose);
-    let cmd_qos = Profile::RobotStream.qos();
-    let cmd_topic = node
-        .create_topic(
-            &Name::parse("/robot_1/cmd_vel").unwrap(),
-            Twist::type_name(),
-            &cmd_qos,
-        )
-        .unwrap();
-    let cmd: Subscription<Twist> = node.create_subscription(&cmd_topic, Some(cmd_qos)).unwrap();
+    let cmd = cmd_subscription(&mut node, "/robot_1/cmd_vel");
 
-    let child = Command::new(env!("CARGO_BIN_EXE_robot_node"))
-        .args([
-            "--ros-args",
+    let child = robot_node(
+        d,
+        &[
             "-r",
             "__ns:=/robot_1",
             "-p",
@@ -344,22 +402,16 @@ fn sim_time_ticks_follow_clock() {
             "control_rate_hz:=10",
             "-p",
             "discovery_period_s:=0.2",
-        ])
-        .env("ROS_DOMAIN_ID", d.to_string())
-        .stdout(Stdio::null())
-        .stderr(Stdio::null())
-        .spawn()
-        .unwrap();
+        ],
+    )
+    .stdout(Stdio::null())
+    .stderr(Stdio::null())
+    .spawn()
+    .unwrap();
     let _child = Kill(child);
 
     // Robot has a part, storage is up (+y): expect linear.y = +0.5 while the clock runs.
-    let mut sim_t = 0.0f64;
-    let mut up = 0usize;
-    let t0 = Instant::now();
-    while t0.elapsed() < Duration::from_secs(10) && up < 5 {
-        sim_t += 0.05;
-        let st = Time::from_secs_f64(sim_t);
-        clock.publish(Clock { clock: st }).ok();
+    let publish_data = |st: Time| {
         own_pose
             .publish(PoseStamped::planar(st, "map", 0.0, -0.5))
             .ok();
@@ -367,6 +419,15 @@ fn sim_time_ticks_follow_clock() {
         s_pose
             .publish(PoseStamped::planar(st, "map", 0.0, 1.0))
             .ok();
+    };
+    let mut sim_t = 0.0f64;
+    let mut up = 0usize;
+    let t0 = Instant::now();
+    while t0.elapsed() < Duration::from_secs(10) && up < 5 {
+        sim_t += 0.05;
+        let st = Time::from_secs_f64(sim_t);
+        clock.publish(Clock { clock: st }).ok();
+        publish_data(st);
         while let Ok(Some((t, _))) = cmd.take() {
             if t.linear.y > 0.4 && t.linear.x == 0.0 {
                 up += 1;
@@ -381,14 +442,7 @@ fn sim_time_ticks_follow_clock() {
     let quiet = Instant::now();
     let mut n = 0;
     while quiet.elapsed() < Duration::from_millis(800) {
-        let st = Time::from_secs_f64(sim_t);
-        own_pose
-            .publish(PoseStamped::planar(st, "map", 0.0, -0.5))
-            .ok();
-        own_part.publish(Bool { data: true }).ok();
-        s_pose
-            .publish(PoseStamped::planar(st, "map", 0.0, 1.0))
-            .ok();
+        publish_data(Time::from_secs_f64(sim_t));
         while let Ok(Some(_)) = cmd.take() {
             n += 1;
         }
@@ -397,80 +451,49 @@ fn sim_time_ticks_follow_clock() {
     assert_eq!(n, 0, "commands while /clock was stopped");
 }
 
-/// Two robots in one process (`-p robots:=robot_0,robot_1`): one reader per topic for
-/// both (robot_1's own topics are robot_0's peer topics and vice versa), each robot acts
-/// on its own data and sees the other as a peer, each has its own cmd_vel.
-#[test]
-fn two_robots_in_one_process_share_one_reader_per_topic() {
-    let d = domain(57);
-    let ctx = Context::with_options(ContextOptions::new().domain_id(d)).unwrap();
-    let mut node = ctx
-        .new_node(
-            NodeName::new("/", &format!("test_multi_{}", std::process::id())).unwrap(),
-            NodeOptions::new().enable_rosout(false),
-        )
-        .unwrap();
-    let pose_pubs: Vec<Publisher<PoseStamped>> = ["/robot_0/pose", "/robot_1/pose"]
-        .iter()
-        .map(|n| publisher(&mut node, n, Profile::RobotStream))
-        .collect();
-    let part_pubs: Vec<Publisher<Bool>> = ["/robot_0/has_part", "/robot_1/has_part"]
-        .iter()
-        .map(|n| publisher(&mut node, n, Profile::RobotStream))
-        .collect();
-    let m_pose: Publisher<PoseStamped> =
-        publisher(&mut node, "/machine_0/pose", Profile::LatchedPose);
-    let m_ready: Publisher<Bool> =
-        publisher(&mut node, "/machine_0/part_ready", Profile::PartReady);
-    let s_pose: Publisher<PoseStamped> =
-        publisher(&mut node, "/storage_0/pose", Profile::LatchedPose);
-    let cmd_sub = |node: &mut Node, name: &str| -> Subscription<Twist> {
-        let qos = Profile::RobotStream.qos();
-        let topic = node
-            .create_topic(&Name::parse(name).unwrap(), Twist::type_name(), &qos)
-            .unwrap();
-        node.create_subscription(&topic, Some(qos)).unwrap()
-    };
-    // spun, so that the node learns which readers its writers matched
-    let spinner = node.spinner().unwrap();
-    std::thread::spawn(move || smol::block_on(spinner.spin()));
-    let cmd0 = cmd_sub(&mut node, "/robot_0/cmd_vel");
-    let cmd1 = cmd_sub(&mut node, "/robot_1/cmd_vel");
+/// Publishers of robot_0 (no part, left of the ready machine: heads +x) and robot_1
+/// (carrying a part, below the storage: heads +y), the machine and the storage.
+struct TwoRobotWorld {
+    pose_pubs: Vec<Publisher<PoseStamped>>,
+    part_pubs: Vec<Publisher<Bool>>,
+    m_pose: Publisher<PoseStamped>,
+    m_ready: Publisher<Bool>,
+    s_pose: Publisher<PoseStamped>,
+}
 
-    let tmp = std::env::temp_dir();
-    let err_path = tmp.join(format!("robot_node_multi_{}.log", std::process::id()));
-    let out_path = tmp.join(format!("robot_node_multi_{}.jsonl", std::process::id()));
-    let child = Command::new(env!("CARGO_BIN_EXE_robot_node"))
-        .args([
-            "--ros-args",
-            "-p",
-            "robots:=robot_0..1",
-            "-p",
-            "control_rate_hz:=20",
-            "-p",
-            "discovery_period_s:=0.2",
-            "-p",
-            "stats_json:=true",
-            "-p",
-            "stats_period_s:=0.5",
-        ])
-        .env("ROS_DOMAIN_ID", d.to_string())
-        .env("RUST_LOG", "info,rustdds=warn,ros2_client=warn")
-        .stdout(std::fs::File::create(&out_path).unwrap())
-        .stderr(std::fs::File::create(&err_path).unwrap())
-        .spawn()
-        .unwrap();
-    let mut child = Kill(child);
-    let show_log = || std::fs::read_to_string(&err_path).unwrap_or_default();
+impl TwoRobotWorld {
+    fn new(node: &mut Node) -> Self {
+        Self {
+            pose_pubs: ["/robot_0/pose", "/robot_1/pose"]
+                .iter()
+                .map(|n| publisher(node, n, Profile::RobotStream))
+                .collect(),
+            part_pubs: ["/robot_0/has_part", "/robot_1/has_part"]
+                .iter()
+                .map(|n| publisher(node, n, Profile::RobotStream))
+                .collect(),
+            m_pose: publisher(node, "/machine_0/pose", Profile::LatchedPose),
+            m_ready: publisher(node, "/machine_0/part_ready", Profile::PartReady),
+            s_pose: publisher(node, "/storage_0/pose", Profile::LatchedPose),
+        }
+    }
 
-    let running = Arc::new(AtomicBool::new(true));
-    let pub_thread = {
-        let running = running.clone();
+    /// Publish at 20 Hz until `running` clears; returns the machine's and the robots'
+    /// pose publishers.
+    fn spawn(
+        self,
+        running: Arc<AtomicBool>,
+    ) -> std::thread::JoinHandle<(Publisher<PoseStamped>, Vec<Publisher<PoseStamped>>)> {
+        let Self {
+            pose_pubs,
+            part_pubs,
+            m_pose,
+            m_ready,
+            s_pose,
+        } = self;
         std::thread::spawn(move || {
             while running.load(Ordering::SeqCst) {
                 let st = Time::now();
-                // robot_0: no part, left of the ready machine -> right (+x);
-                // robot_1: carrying a part, below the storage -> up (+y)
                 pose_pubs[0]
                     .publish(PoseStamped::planar(st, "map", -0.5, -0.5))
                     .ok();
@@ -490,7 +513,70 @@ fn two_robots_in_one_process_share_one_reader_per_topic() {
             }
             (m_pose, pose_pubs)
         })
-    };
+    }
+}
+
+/// One final stats line per hosted robot, each with the process's 7 shared readers
+/// (2 own topics per robot + machine pose/part_ready + storage pose; separate readers per
+/// robot would be 2 x 7 = 14), commands, and no foreign-writer drops.
+fn assert_final_stats(out_path: &std::path::Path) {
+    let finals: Vec<serde_json::Value> = std::fs::read_to_string(out_path)
+        .unwrap()
+        .lines()
+        .filter_map(|l| serde_json::from_str::<serde_json::Value>(l).ok())
+        .filter(|v| v["final"] == true)
+        .collect();
+    assert_eq!(finals.len(), 2, "one final stats line per robot");
+    for (f, me) in finals.iter().zip(["robot_0", "robot_1"]) {
+        assert_eq!(f["robot"], me);
+        assert_eq!(f["subscriptions"], 7, "{f}");
+        assert!(f["commands"].as_u64().unwrap() > 5, "{f}");
+        assert_eq!(f["dropped"]["foreign_writer"], 0, "{f}");
+    }
+}
+
+/// Two robots in one process (`-p robots:=robot_0,robot_1`): one reader per topic for
+/// both (robot_1's own topics are robot_0's peer topics and vice versa), each robot acts
+/// on its own data and sees the other as a peer, each has its own cmd_vel.
+#[test]
+fn two_robots_in_one_process_share_one_reader_per_topic() {
+    let d = domain(57);
+    let (_ctx, mut node) = test_node(d, "test_multi");
+    let world = TwoRobotWorld::new(&mut node);
+    // spun, so that the node learns which readers its writers matched
+    let spinner = node.spinner().unwrap();
+    std::thread::spawn(move || smol::block_on(spinner.spin()));
+    let cmd0 = cmd_subscription(&mut node, "/robot_0/cmd_vel");
+    let cmd1 = cmd_subscription(&mut node, "/robot_1/cmd_vel");
+
+    let tmp = std::env::temp_dir();
+    let err_path = tmp.join(format!("robot_node_multi_{}.log", std::process::id()));
+    let out_path = tmp.join(format!("robot_node_multi_{}.jsonl", std::process::id()));
+    let child = robot_node(
+        d,
+        &[
+            "-p",
+            "robots:=robot_0..1",
+            "-p",
+            "control_rate_hz:=20",
+            "-p",
+            "discovery_period_s:=0.2",
+            "-p",
+            "stats_json:=true",
+            "-p",
+            "stats_period_s:=0.5",
+        ],
+    )
+    .env("RUST_LOG", "info,rustdds=warn,ros2_client=warn")
+    .stdout(std::fs::File::create(&out_path).unwrap())
+    .stderr(std::fs::File::create(&err_path).unwrap())
+    .spawn()
+    .unwrap();
+    let mut child = Kill(child);
+    let show_log = || std::fs::read_to_string(&err_path).unwrap_or_default();
+
+    let running = Arc::new(AtomicBool::new(true));
+    let pub_thread = world.spawn(running.clone());
     let right = wait_for(&cmd0, Duration::from_secs(15), |t| {
         t.linear.x > 0.4 && t.linear.y == 0.0
     });
@@ -508,22 +594,7 @@ fn two_robots_in_one_process_share_one_reader_per_topic() {
         m_pose.get_subscription_count(&node),
         pose_pubs[1].get_subscription_count(&node),
     );
-    let st = Command::new("kill")
-        .args(["-INT", &child.0.id().to_string()])
-        .status()
-        .unwrap();
-    assert!(st.success());
-    let t_kill = Instant::now();
-    let status = loop {
-        if let Some(s) = child.0.try_wait().unwrap() {
-            break s;
-        }
-        assert!(
-            t_kill.elapsed() < Duration::from_secs(5),
-            "no exit on SIGINT"
-        );
-        std::thread::sleep(Duration::from_millis(10));
-    };
+    let status = signal_and_wait(&mut child, "-INT", Duration::from_millis(10), || {});
     let log = show_log();
     assert!(status.success(), "exit status {status:?}; log:\n{log}");
     assert!(right.is_some(), "robot_0 never commanded +x; log:\n{log}");
@@ -533,22 +604,7 @@ fn two_robots_in_one_process_share_one_reader_per_topic() {
         (1, 1),
         "readers matched by /machine_0/pose, /robot_1/pose"
     );
-
-    let finals: Vec<serde_json::Value> = std::fs::read_to_string(&out_path)
-        .unwrap()
-        .lines()
-        .filter_map(|l| serde_json::from_str::<serde_json::Value>(l).ok())
-        .filter(|v| v["final"] == true)
-        .collect();
-    assert_eq!(finals.len(), 2, "one final stats line per robot");
-    for (f, me) in finals.iter().zip(["robot_0", "robot_1"]) {
-        assert_eq!(f["robot"], me);
-        // 2 own topics per robot + machine pose/part_ready + storage pose = 7 readers in
-        // the process, shared (separate readers per robot would be 2 x 7 = 14)
-        assert_eq!(f["subscriptions"], 7, "{f}");
-        assert!(f["commands"].as_u64().unwrap() > 5, "{f}");
-        assert_eq!(f["dropped"]["foreign_writer"], 0, "{f}");
-    }
+    assert_final_stats(&out_path);
     // each sees one peer (the other hosted robot), one machine, one storage
     for me in ["robot_0", "robot_1"] {
         assert!(

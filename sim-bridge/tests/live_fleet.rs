@@ -13,34 +13,19 @@
 //!
 //! Needs `tending`, `sim_bridge` and `robot_node` in the same target directory.
 
+#[path = "../../tests/faults/common/mod.rs"]
+mod common;
+use common::{bin, wall_ns};
+
 use std::io::{BufRead, BufReader, Write};
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
-use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
+use std::time::{Duration, Instant};
 
 use msgs::{Bool, DiagnosticArray, PoseStamped};
 
 const STALE_S: f64 = 2.0;
-
-fn bin(name: &str) -> PathBuf {
-    let p = PathBuf::from(env!("CARGO_BIN_EXE_sim_bridge"))
-        .parent()
-        .unwrap()
-        .join(name);
-    assert!(
-        p.exists(),
-        "{} not built: cargo build --release --bin tending -p robot-node",
-        p.display()
-    );
-    p
-}
-
-fn wall_ns() -> u64 {
-    SystemTime::now()
-        .duration_since(UNIX_EPOCH)
-        .unwrap()
-        .as_nanos() as u64
-}
+const KILLED: [&str; 2] = ["robot_1", "robot_2"];
 
 fn policy() -> Option<PathBuf> {
     let p = PathBuf::from(env!("CARGO_MANIFEST_DIR"))
@@ -75,33 +60,31 @@ fn max_gap(times: &[u64], a: u64, b: u64) -> f64 {
     gap as f64 / 1e9
 }
 
-#[test]
-fn live_add_kill_and_machine_keep_the_fleet_working() {
-    let phase_s: f64 = std::env::var("TENDING_LIVE_PHASE_S")
-        .ok()
-        .and_then(|v| v.parse().ok())
-        .unwrap_or(15.0);
-    let domain = (std::process::id() % 40) as u16 + 60;
-    let dir = std::env::temp_dir().join(format!("tending-live-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    let pol = policy();
-    match &pol {
-        Some(p) => eprintln!("controller: policy {}", p.display()),
-        None => eprintln!(
-            "controller: greedy (policy/pretrained/smappo_6.4_2.safetensors does not exist)"
-        ),
-    }
+/// Wall times (ns) of one fleet run's phase boundaries, and its stdout.
+struct Run {
+    start_ns: u64,
+    t_add: u64,
+    t_kill: u64,
+    t_machine: u64,
+    t_end: u64,
+    text: String,
+}
+
+/// `tending fleet` of 4.4_2 recording into `dir`: 4 robots added after one phase, 2
+/// SIGKILLed after two, a machine added after three; it stops by itself after four.
+/// Asserts a clean exit and that the kills and the machine were carried out.
+fn run_fleet(phase_s: f64, domain: u16, dir: &Path, pol: Option<&Path>) -> Run {
     let mut cmd = Command::new(bin("tending"));
     cmd.args(["fleet", "--setup", "4.4_2", "--seed", "1"])
         .args(["--duration", &format!("{}", 4.0 * phase_s + 3.0)])
         .args(["--domain", &domain.to_string()])
         .args(["--stale-timeout", &format!("{STALE_S}")])
         .arg("--record")
-        .arg(&dir)
+        .arg(dir)
         .stdin(Stdio::piped())
         .stdout(Stdio::piped())
         .stderr(Stdio::piped());
-    if let Some(p) = &pol {
+    if let Some(p) = pol {
         cmd.arg("--policy").arg(p);
     }
     let mut child = cmd.spawn().unwrap();
@@ -159,13 +142,42 @@ fn live_add_kill_and_machine_keep_the_fleet_working() {
         "{text}"
     );
     assert!(text.contains("sent `add_machine`"), "{text}");
+    Run {
+        start_ns,
+        t_add,
+        t_kill,
+        t_machine,
+        t_end,
+        text,
+    }
+}
 
-    let r = bag::BagReader::open(&dir).unwrap();
-    assert!(r.complete, "bag not finalized");
-    let metrics: Vec<(u64, DiagnosticArray)> = r.decode_topic("/tending/metrics").unwrap();
-    let robots_at = |t: u64| metric_at(&metrics, t, "robots");
-    let machines_phase = |t: u64| -> usize {
-        // machine pose topics with a sample in the second after t
+/// The recorded bag and its `/tending/metrics`.
+struct Bag {
+    r: bag::BagReader,
+    metrics: Vec<(u64, DiagnosticArray)>,
+}
+
+impl Bag {
+    fn open(dir: &Path) -> Self {
+        let r = bag::BagReader::open(dir).unwrap();
+        assert!(r.complete, "bag not finalized");
+        let metrics = r.decode_topic("/tending/metrics").unwrap();
+        Self { r, metrics }
+    }
+
+    fn metric(&self, t: u64, key: &str) -> f64 {
+        metric_at(&self.metrics, t, key)
+    }
+
+    /// Increase of metric `key` over [a, b].
+    fn metric_delta(&self, a: u64, b: u64, key: &str) -> f64 {
+        self.metric(b, key) - self.metric(a, key)
+    }
+
+    /// Machine pose topics with a sample in the second after `t`.
+    fn machines_at(&self, t: u64) -> usize {
+        let r = &self.r;
         r.topics
             .iter()
             .filter(|tp| tp.name.starts_with("/machine_") && tp.name.ends_with("/pose"))
@@ -176,22 +188,32 @@ fn live_add_kill_and_machine_keep_the_fleet_working() {
                 })
             })
             .count()
-    };
-    let times = |topic: &str| -> Vec<u64> {
-        match r.topic_index(topic) {
+    }
+
+    /// Log times of every message on `topic`.
+    fn times(&self, topic: &str) -> Vec<u64> {
+        match self.r.topic_index(topic) {
             None => Vec::new(),
-            Some(i) => r
+            Some(i) => self
+                .r
                 .messages
                 .iter()
                 .filter(|m| m.topic_index == i)
                 .map(|m| m.log_time)
                 .collect(),
         }
-    };
-    let deliveries = |a: u64, b: u64| -> u64 {
+    }
+
+    /// Parts put down (a `has_part` true -> false) in [a, b), over all robots.
+    fn deliveries(&self, a: u64, b: u64) -> u64 {
         let mut n = 0;
-        for tp in r.topics.iter().filter(|t| t.name.ends_with("/has_part")) {
-            let v: Vec<(u64, Bool)> = r.decode_topic(&tp.name).unwrap();
+        for tp in self
+            .r
+            .topics
+            .iter()
+            .filter(|t| t.name.ends_with("/has_part"))
+        {
+            let v: Vec<(u64, Bool)> = self.r.decode_topic(&tp.name).unwrap();
             for w in v.windows(2) {
                 if w[0].1.data && !w[1].1.data && w[1].0 >= a && w[1].0 < b {
                     n += 1;
@@ -199,72 +221,79 @@ fn live_add_kill_and_machine_keep_the_fleet_working() {
             }
         }
         n
-    };
-    let phases = [
-        ("4 robots", start_ns, t_add),
-        ("8 robots (4 added live)", t_add, t_kill),
-        ("6 robots (2 SIGKILLed)", t_kill, t_machine),
-        ("6 robots + 1 machine", t_machine, t_end),
-    ];
-    let initial: Vec<String> = (0..4).map(|i| format!("robot_{i}")).collect();
-    let added: Vec<String> = (4..8).map(|i| format!("robot_{i}")).collect();
-    let killed = ["robot_1", "robot_2"];
-    let mut report = Vec::new();
-    let mut failures = Vec::new();
-    for (k, (label, a, b)) in phases.iter().enumerate() {
-        let (a, b) = (*a, (*b).min(t_end));
-        let d = deliveries(a, b);
-        let dp =
-            metric_at(&metrics, b, "parts_delivered") - metric_at(&metrics, a, "parts_delivered");
-        let dc =
-            metric_at(&metrics, b, "parts_collected") - metric_at(&metrics, a, "parts_collected");
-        let dpm = metric_at(&metrics, b, "p_max") - metric_at(&metrics, a, "p_max");
-        let dcol = metric_at(&metrics, b, "collisions") - metric_at(&metrics, a, "collisions");
-        let mu = if dpm > 0.0 { dc / dpm } else { 0.0 };
-        let secs = (b - a) as f64 / 1e9;
-        eprintln!(
-            "phase {k} {label}: {secs:.1} s, robots {} -> {}, machines ~{}, deliveries (has_part) {d}, reported delivered {dp}, collected {dc}, p_max {dpm}, MU {mu:.3}, collisions {dcol}",
-            robots_at(a + 2_000_000_000),
-            robots_at(b),
-            machines_phase(b.saturating_sub(1_500_000_000)),
-        );
-        report.push(serde_json::json!({
-            "phase": label, "seconds": secs, "deliveries": d, "delivered_reported": dp,
-            "collected": dc, "p_max": dpm, "mu": mu, "collisions": dcol,
-            "robots_end": robots_at(b),
-        }));
-        if d == 0 {
-            failures.push(format!("phase {k} ({label}): no delivery"));
+    }
+}
+
+fn robots(ids: std::ops::Range<usize>) -> Vec<String> {
+    ids.map(|i| format!("robot_{i}")).collect()
+}
+
+/// Robots live in phase `k` starting at `a`, each with the time from which it must not
+/// stall: added robots need DDS discovery before their first command, killed ones are
+/// checked until the kill.
+fn live_in_phase(k: usize, a: u64) -> Vec<(String, u64)> {
+    let mut live = Vec::new();
+    for n in robots(0..4) {
+        if k >= 2 && KILLED.contains(&n.as_str()) {
+            continue;
         }
-        // live robots in this phase, checked from a settle time on (added robots need
-        // DDS discovery before their first command; killed ones until the kill)
-        let mut live: Vec<(&String, u64)> = Vec::new();
-        for n in &initial {
-            if k >= 2 && killed.contains(&n.as_str()) {
-                continue;
-            }
-            live.push((n, a));
+        live.push((n, a));
+    }
+    if k >= 1 {
+        for n in robots(4..8) {
+            live.push((n, if k == 1 { a + 8_000_000_000 } else { a }));
         }
-        if k >= 1 {
-            for n in &added {
-                live.push((n, if k == 1 { a + 8_000_000_000 } else { a }));
-            }
-        }
-        for (n, from) in live {
-            for leaf in ["cmd_vel", "pose"] {
-                let ts = times(&format!("/{n}/{leaf}"));
-                let g = max_gap(&ts, from, b - 500_000_000);
-                if g >= STALE_S {
-                    failures.push(format!(
-                        "phase {k} ({label}): /{n}/{leaf} silent for {g:.2} s"
-                    ));
-                }
+    }
+    live
+}
+
+/// Phase `k` over [a, b]: prints and returns its figures; a phase without a delivery or
+/// with a live robot silent (cmd_vel or pose) for the staleness timeout is a failure.
+fn check_phase(
+    bag: &Bag,
+    k: usize,
+    label: &str,
+    (a, b): (u64, u64),
+    failures: &mut Vec<String>,
+) -> serde_json::Value {
+    let d = bag.deliveries(a, b);
+    let dp = bag.metric_delta(a, b, "parts_delivered");
+    let dc = bag.metric_delta(a, b, "parts_collected");
+    let dpm = bag.metric_delta(a, b, "p_max");
+    let dcol = bag.metric_delta(a, b, "collisions");
+    let mu = if dpm > 0.0 { dc / dpm } else { 0.0 };
+    let secs = (b - a) as f64 / 1e9;
+    eprintln!(
+        "phase {k} {label}: {secs:.1} s, robots {} -> {}, machines ~{}, deliveries (has_part) {d}, reported delivered {dp}, collected {dc}, p_max {dpm}, MU {mu:.3}, collisions {dcol}",
+        bag.metric(a + 2_000_000_000, "robots"),
+        bag.metric(b, "robots"),
+        bag.machines_at(b.saturating_sub(1_500_000_000)),
+    );
+    if d == 0 {
+        failures.push(format!("phase {k} ({label}): no delivery"));
+    }
+    for (n, from) in live_in_phase(k, a) {
+        for leaf in ["cmd_vel", "pose"] {
+            let ts = bag.times(&format!("/{n}/{leaf}"));
+            let g = max_gap(&ts, from, b - 500_000_000);
+            if g >= STALE_S {
+                failures.push(format!(
+                    "phase {k} ({label}): /{n}/{leaf} silent for {g:.2} s"
+                ));
             }
         }
     }
-    // informational: robots that never moved (greedy robots may wait out the run idle)
-    for n in initial.iter().chain(&added) {
-        let poses: Vec<(u64, PoseStamped)> = r.decode_topic(&format!("/{n}/pose")).unwrap();
+    serde_json::json!({
+        "phase": label, "seconds": secs, "deliveries": d, "delivered_reported": dp,
+        "collected": dc, "p_max": dpm, "mu": mu, "collisions": dcol,
+        "robots_end": bag.metric(b, "robots"),
+    })
+}
+
+/// Informational: robots that never moved (greedy robots may wait out the run idle).
+fn report_robots_that_never_moved(bag: &Bag) {
+    for n in robots(0..8) {
+        let poses: Vec<(u64, PoseStamped)> = bag.r.decode_topic(&format!("/{n}/pose")).unwrap();
         let p0 = poses
             .first()
             .map(|p| (p.1.pose.position.x, p.1.pose.position.y));
@@ -272,17 +301,21 @@ fn live_add_kill_and_machine_keep_the_fleet_working() {
             p0.is_some_and(|(x, y)| (p.pose.position.x - x).hypot(p.pose.position.y - y) > 0.02)
         });
         if !moved {
-            // not a stall: its cmd_vel kept arriving (checked above); the greedy controller
-            // stays when a nearer peer takes every ready machine
+            // not a stall: its cmd_vel kept arriving (checked per phase); the greedy
+            // controller stays when a nearer peer takes every ready machine
             eprintln!(
                 "{n} never moved ({} poses): its controller chose to stay",
                 poses.len()
             );
         }
     }
-    // the killed bodies: pose stops within the staleness timeout + 1 s of the kill
-    for n in killed {
-        let ts = times(&format!("/{n}/pose"));
+}
+
+/// The killed bodies: pose stops within the staleness timeout + 1 s of the kill, and no
+/// cmd_vel comes after it.
+fn check_killed(bag: &Bag, t_kill: u64, failures: &mut Vec<String>) {
+    for n in KILLED {
+        let ts = bag.times(&format!("/{n}/pose"));
         let last = ts.iter().copied().max().unwrap_or(0);
         let after = (last as f64 - t_kill as f64) / 1e9;
         eprintln!("{n}: last pose {after:.2} s after the SIGKILL");
@@ -292,12 +325,47 @@ fn live_add_kill_and_machine_keep_the_fleet_working() {
                 STALE_S + 1.0
             ));
         }
-        let cmds = times(&format!("/{n}/cmd_vel"));
+        let cmds = bag.times(&format!("/{n}/cmd_vel"));
         if cmds.iter().any(|&t| t > t_kill + 200_000_000) {
             failures.push(format!("{n}: cmd_vel after its SIGKILL"));
         }
     }
-    let despawned = metric_at(&metrics, t_end, "robots");
+}
+
+#[test]
+fn live_add_kill_and_machine_keep_the_fleet_working() {
+    let phase_s: f64 = std::env::var("TENDING_LIVE_PHASE_S")
+        .ok()
+        .and_then(|v| v.parse().ok())
+        .unwrap_or(15.0);
+    let domain = (std::process::id() % 40) as u16 + 60;
+    let dir = std::env::temp_dir().join(format!("tending-live-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    let pol = policy();
+    match &pol {
+        Some(p) => eprintln!("controller: policy {}", p.display()),
+        None => eprintln!(
+            "controller: greedy (policy/pretrained/smappo_6.4_2.safetensors does not exist)"
+        ),
+    }
+    let run = run_fleet(phase_s, domain, &dir, pol.as_deref());
+    let bag = Bag::open(&dir);
+    let t_end = run.t_end;
+    let phases = [
+        ("4 robots", run.start_ns, run.t_add),
+        ("8 robots (4 added live)", run.t_add, run.t_kill),
+        ("6 robots (2 SIGKILLed)", run.t_kill, run.t_machine),
+        ("6 robots + 1 machine", run.t_machine, t_end),
+    ];
+    let mut failures = Vec::new();
+    let report: Vec<serde_json::Value> = phases
+        .iter()
+        .enumerate()
+        .map(|(k, (label, a, b))| check_phase(&bag, k, label, (*a, (*b).min(t_end)), &mut failures))
+        .collect();
+    report_robots_that_never_moved(&bag);
+    check_killed(&bag, run.t_kill, &mut failures);
+    let despawned = bag.metric(t_end, "robots");
     eprintln!("robots at the end: {despawned}");
     if let Ok(path) = std::env::var("TENDING_LIVE_REPORT") {
         let v = serde_json::json!({
@@ -306,7 +374,7 @@ fn live_add_kill_and_machine_keep_the_fleet_working() {
         });
         std::fs::write(path, serde_json::to_string_pretty(&v).unwrap()).unwrap();
     }
-    assert!(failures.is_empty(), "{}\n{text}", failures.join("\n"));
+    assert!(failures.is_empty(), "{}\n{}", failures.join("\n"), run.text);
     assert_eq!(despawned, 6.0, "robots at the end");
     let _ = std::fs::remove_dir_all(&dir);
 }
