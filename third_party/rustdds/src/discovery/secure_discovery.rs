@@ -1578,6 +1578,15 @@ impl SecureDiscovery {
     self.cached_key_exchange_messages_for_resend = msgs_still_to_cache;
   }
 
+  /// A remote participant is gone (lease expired or disposed): forget its handshake, so
+  /// the stored message kept for re-arming is dropped and nothing more is sent to it.
+  pub fn forget_remote_participant(&mut self, remote_guid_prefix: &GuidPrefix) {
+    self.handshake_states.remove(remote_guid_prefix);
+    self
+      .stored_authentication_messages
+      .remove(remote_guid_prefix);
+  }
+
   fn reset_stored_message_resend_counter(&mut self, remote_guid_prefix: &GuidPrefix) {
     if let Some(msg) = self
       .stored_authentication_messages
