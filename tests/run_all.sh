@@ -5,32 +5,77 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 export CARGO_TERM_COLOR=never
+# Elapsed time per section, so a slow suite shows where its minutes go.
+section() { echo "== [$(date -u +%H:%M:%S), ${SECONDS}s] $*"; }
 
 # System tools the fault tests use (network namespaces, packet loss): Debian packages,
 # installed here so a fresh machine needs nothing by hand.
 if ! command -v iptables >/dev/null || ! command -v ip >/dev/null; then
     if [ "$(id -u)" = 0 ] && command -v apt-get >/dev/null; then
-        echo "== apt-get install iptables iproute2 (fault tests)"
+        section "apt-get install iptables iproute2 (fault tests)"
         apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq iptables iproute2
     fi
 fi
+# Python test environments (virtualenvs in target/, ignored). Each is created if missing
+# and rebuilt only when its requirements file or the Python version changes. On a fresh
+# clone creating them is mostly downloading wheels, so it runs in the background while
+# cargo builds (the two cores are cargo's; pip mostly waits on the network) and is
+# waited for before the first Python section.
+py_sys="$(command -v python3.11 || command -v python3)"
+# ensure_venv DIR REQUIREMENTS
+ensure_venv() {
+    local dir="$1" req="$2" want
+    want="$(sha256sum "$req" | cut -d' ' -f1) $("$py_sys" -c 'import sys; print(sys.version.split()[0])')"
+    if [ ! -x "$dir/bin/python" ] || [ "$(cat "$dir/.requirements.sha256" 2>/dev/null)" != "$want" ]; then
+        # `|| return 1` on each step: set -e does not apply inside an && list, and a
+        # failed install must not be recorded as done.
+        rm -rf "$dir" || return 1
+        "$py_sys" -m venv "$dir" || return 1
+        "$dir/bin/python" -m pip install --quiet --disable-pip-version-check -r "$req" || return 1
+        echo "$want" > "$dir/.requirements.sha256"
+    fi
+}
+venv="target/interop-venv"
+venv_b="target/venv-bags"
+venv_p="target/venv-python"
+mkdir -p target
+venv_log="target/venvs.log"
+(
+    ensure_venv "$venv" tests/interop/requirements.txt &&
+        ensure_venv "$venv_b" tests/bags/requirements.txt &&
+        ensure_venv "$venv_p" python/tests/requirements.txt
+) >"$venv_log" 2>&1 &
+venv_pid=$!
+# A failed cargo step ends the script; do not leave pip running behind it.
+trap 'kill "$venv_pid" 2>/dev/null || true' EXIT
+# wait_venvs: the background venv job's result; its output is shown if it failed.
+wait_venvs() {
+    if ! wait "$venv_pid"; then
+        echo "creating the Python test virtualenvs failed:"
+        cat "$venv_log"
+        exit 1
+    fi
+}
+
 # Binaries first: the fault tests (sim-bridge/tests -> tests/faults) and the interop tests
 # run the `tending`, `robot_node` and `sim_bridge` binaries of other packages, which
 # `cargo test` does not build for them.
-echo "== cargo build --release --workspace --bins"
+section "cargo build --release --workspace --bins"
 cargo build --release --locked -j 2 --workspace --bins 2>&1
-echo "== cargo test --workspace --release"
+section "cargo test --workspace --release"
 cargo test --workspace --release --locked -j 2 2>&1
 
 # Vendored rustdds (third_party/, ADR 0005): the start-up deadlock regression tests, the
 # DATA_FRAG tests (an encrypted fragment run must survive deserialization) and the
 # crypto-handle test (a re-created writer must register), with the security feature the
 # fleet builds it with. Run from a copy outside the workspace: cargo refuses a nested
-# package that is not a member.
-echo "== cargo test: vendored rustdds, discovery deadlock, DATA_FRAG and crypto-handle regressions"
+# package that is not a member. Built in the dev profile without debuginfo: these are logic
+# regression tests (they pass in 2 s either way), and an unoptimised build of rustdds and
+# its ~120 dependencies takes 1.5 min here against 3-4 min optimised.
+section "cargo test: vendored rustdds, discovery deadlock, DATA_FRAG and crypto-handle regressions"
 rdds="$(mktemp -d)"
 cp -r third_party/rustdds/. "$rdds"
-CARGO_TARGET_DIR="$PWD/target/third_party" cargo test --release --locked -j 2 \
+CARGO_TARGET_DIR="$PWD/target/third_party" cargo test --locked -j 2 --config 'profile.dev.debug=0' \
     --manifest-path "$rdds/Cargo.toml" --features security --lib -- \
     discovery::discovery::tests::announcing_a_local_writer_holds_no_lock_across_blocking_sends \
     discovery::discovery::tests::the_published_announce_code_path_deadlocks_and_the_test_sees_it \
@@ -42,22 +87,8 @@ rm -rf "$rdds"
 # tests/interop (launch-scripts install layout + launch file, robot_node and sim_bridge
 # interop over DDS). The virtualenv lives in target/ (ignored), is created if missing and
 # reinstalled only when tests/interop/requirements.txt changes.
-py_sys="$(command -v python3.11 || command -v python3)"
-# ensure_venv DIR REQUIREMENTS: a virtualenv at DIR with REQUIREMENTS installed, created if
-# missing and rebuilt only when the requirements file or the Python version changes.
-ensure_venv() {
-    local dir="$1" req="$2" want
-    want="$(sha256sum "$req" | cut -d' ' -f1) $("$py_sys" -c 'import sys; print(sys.version.split()[0])')"
-    if [ ! -x "$dir/bin/python" ] || [ "$(cat "$dir/.requirements.sha256" 2>/dev/null)" != "$want" ]; then
-        rm -rf "$dir"
-        "$py_sys" -m venv "$dir"
-        "$dir/bin/python" -m pip install --quiet --disable-pip-version-check -r "$req"
-        echo "$want" > "$dir/.requirements.sha256"
-    fi
-}
-echo "== python interop tests (tests/interop)"
-venv="target/interop-venv"
-ensure_venv "$venv" tests/interop/requirements.txt
+section "python interop tests (tests/interop)"
+wait_venvs
 export TENDING_BIN_DIR="${TENDING_BIN_DIR:-$(cd "${CARGO_TARGET_DIR:-target}/release" && pwd)}"
 export RMW_IMPLEMENTATION=rmw_fastrtps_cpp
 unset ROS_LOCALHOST_ONLY ROS_AUTOMATIC_DISCOVERY_RANGE ROS_STATIC_PEERS FASTRTPS_DEFAULT_PROFILES_FILE
@@ -71,9 +102,7 @@ timeout 900 "$venv/bin/python" -m pytest tests/interop -q -rsxR --reruns 1 --rer
 
 # Python: rosbag2 MCAP bags written by `tending` read back by the `rosbags` and
 # `mcap` + `mcap-ros2-support` packages (own venv, same reinstall rule).
-echo "== python bag tests (tests/bags)"
-venv_b="target/venv-bags"
-ensure_venv "$venv_b" tests/bags/requirements.txt
+section "python bag tests (tests/bags)"
 timeout 600 "$venv_b/bin/python" -m pytest tests/bags -q -rs -p no:cacheprovider
 
 # Python: the `tending` package (python/: PyO3 + maturin) built from the checkout with
@@ -81,10 +110,9 @@ timeout 600 "$venv_b/bin/python" -m pytest tests/bags -q -rs -p no:cacheprovider
 # requirements; the package itself is rebuilt every run, incrementally in the workspace
 # target dir, and without build isolation so maturin comes from the venv, not PyPI).
 # PettingZoo's API and seed tests, spaces, determinism, equality with `tending sim`.
-echo "== python package tests (python/tests)"
-venv_p="target/venv-python"
-ensure_venv "$venv_p" python/tests/requirements.txt
+section "python package tests (python/tests)"
 # PATH: maturin's PEP 517 hook runs the `maturin` binary of the venv.
 PATH="$PWD/$venv_p/bin:$PATH" "$venv_p/bin/python" -m pip install --quiet \
     --disable-pip-version-check --no-build-isolation --force-reinstall --no-deps ./python
 timeout 600 "$venv_p/bin/python" -m pytest python/tests -q -rs -p no:cacheprovider
+section "all tests passed"
