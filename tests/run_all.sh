@@ -67,12 +67,13 @@ cargo test --workspace --release --locked -j 2 2>&1
 
 # Vendored rustdds (third_party/, ADR 0005): the start-up deadlock regression tests, the
 # DATA_FRAG tests (an encrypted fragment run must survive deserialization) and the
-# crypto-handle test (a re-created writer must register), with the security feature the
+# crypto-handle test (a re-created writer must register), the reader-cache tests (built-in
+# readers must not lose unread discovery or key-exchange samples), with the security feature the
 # fleet builds it with. Run from a copy outside the workspace: cargo refuses a nested
 # package that is not a member. Built in the dev profile without debuginfo: these are logic
 # regression tests (they pass in 2 s either way), and an unoptimised build of rustdds and
 # its ~120 dependencies takes 1.5 min here against 3-4 min optimised.
-section "cargo test: vendored rustdds, discovery deadlock, DATA_FRAG and crypto-handle regressions"
+section "cargo test: vendored rustdds, discovery deadlock, DATA_FRAG, crypto-handle and reader-cache regressions"
 rdds="$(mktemp -d)"
 cp -r third_party/rustdds/. "$rdds"
 CARGO_TARGET_DIR="$PWD/target/third_party" cargo test --locked -j 2 --config 'profile.dev.debug=0' \
@@ -80,7 +81,9 @@ CARGO_TARGET_DIR="$PWD/target/third_party" cargo test --locked -j 2 --config 'pr
     discovery::discovery::tests::announcing_a_local_writer_holds_no_lock_across_blocking_sends \
     discovery::discovery::tests::the_published_announce_code_path_deadlocks_and_the_test_sees_it \
     messages::submessages::data_frag::tests \
-    security::cryptographic::cryptographic_builtin::crypto_key_factory::tests 2>&1
+    security::cryptographic::cryptographic_builtin::crypto_key_factory::tests \
+    structure::dds_cache::tests \
+    discovery::discovery::tests::sedp_topic_caches_get_sedp_reader_limits 2>&1
 rm -rf "$rdds"
 
 # Python: rclpy (real ROS 2 Jazzy, Fast DDS, from PyPI wheels) against the release binaries:

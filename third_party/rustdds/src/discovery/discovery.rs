@@ -601,7 +601,7 @@ impl Discovery {
       builtin_topic_type_names::DCPS_PARTICIPANT_VOLATILE_MESSAGE_SECURE,
       ParticipantVolatileMessageSecure,
       Some(Self::create_participant_volatile_message_secure_qos()),
-      None,  // Reader QoS: as above
+      Some(Self::participant_volatile_message_secure_reader_qos()), // Reader QoS
       false, // Regular stateful RTPS Reader & Writer
       EntityId::P2P_BUILTIN_PARTICIPANT_VOLATILE_SECURE_READER,
       P2P_BUILTIN_PARTICIPANT_VOLATILE_SECURE_TOKEN,
@@ -2119,12 +2119,34 @@ impl Discovery {
     // on the proxy while the reader required PresentationAccessScope::Topic,
     // causing a spurious QoS incompatibility that prevented the volatile
     // endpoints from matching and blocked all secure key exchange.
+    Self::participant_volatile_message_secure_qos_builder().build()
+  }
+
+  #[cfg(feature = "security")]
+  const fn participant_volatile_message_secure_qos_builder() -> QosPolicyBuilder {
     Self::builtin_subscriber_qos_builder()
       .reliability(Reliability::Reliable {
         max_blocking_time: Duration::from_std(StdDuration::from_millis(100)),
       })
       .history(History::KeepAll)
       .durability(Durability::Volatile)
+  }
+
+  // QoS of the built-in ParticipantVolatileMessageSecure DataReader: the topic QoS
+  // above with the SEDP readers' ResourceLimits.
+  //
+  // Without ResourceLimits its DDSCache keeps at most 64 samples, read or not (see
+  // SEDP_READER_RESOURCE_LIMITS). At start-up a participant receives a key-exchange
+  // message for every endpoint pair it matches with every remote participant, in
+  // bursts, while the discovery thread that reads them is busy with handshakes. More
+  // than 64 unread messages then let garbage collection remove the oldest unread
+  // ones. The RTPS Reader has acknowledged them and the Writer never resends them, so
+  // those endpoint pairs never get keys and their data is never decoded (seen as a
+  // fleet whose robots' commands never reach the simulator bridge).
+  #[cfg(feature = "security")]
+  pub(crate) const fn participant_volatile_message_secure_reader_qos() -> QosPolicies {
+    Self::participant_volatile_message_secure_qos_builder()
+      .resource_limits(Self::SEDP_READER_RESOURCE_LIMITS)
       .build()
   }
 
@@ -2277,6 +2299,8 @@ mod tests {
     for topic in [
       builtin_topic_names::DCPS_PUBLICATIONS_SECURE,
       builtin_topic_names::DCPS_SUBSCRIPTIONS_SECURE,
+      // key exchange: unread messages must outlast a start-up burst
+      builtin_topic_names::DCPS_PARTICIPANT_VOLATILE_MESSAGE_SECURE,
     ] {
       assert_eq!(max_samples(topic), 4096, "{topic} cache limit");
     }

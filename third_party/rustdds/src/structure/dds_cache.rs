@@ -709,6 +709,62 @@ mod tests {
     );
   }
 
+  // Key-exchange messages waiting for the discovery thread: 100 of them, from 10
+  // remote participants, all received in order and none read yet, then one garbage
+  // collection. Returns how many a DataReader can still read.
+  #[cfg(feature = "security")]
+  fn unread_key_exchange_messages_after_collection(reader_qos: &QosPolicies) -> usize {
+    let volatile_writer = |prefix| {
+      GUID::new(
+        GuidPrefix::new(&[prefix; 12]),
+        EntityId::P2P_BUILTIN_PARTICIPANT_VOLATILE_SECURE_WRITER,
+      )
+    };
+    let mut topic_cache = TopicCache::new(
+      "DCPSParticipantVolatileMessageSecure".to_string(),
+      TypeDesc::new("ParticipantVolatileMessageSecure".to_string()),
+      &Discovery::create_participant_volatile_message_secure_qos(),
+    );
+    topic_cache.update_keep_limits(reader_qos);
+    for prefix in 1..=10 {
+      let writer = volatile_writer(prefix);
+      for sn in 1..=10 {
+        topic_cache.add_change(
+          &Timestamp::now(),
+          CacheChange::new(
+            writer,
+            SequenceNumber::new(sn),
+            WriteOptions::default(),
+            DDSData::new(SerializedPayload::default()),
+          ),
+        );
+      }
+      topic_cache.mark_reliably_received_before(writer, SequenceNumber::new(11));
+    }
+    topic_cache.remove_changes_before(Timestamp::ZERO);
+    topic_cache
+      .get_changes_in_range_reliable(&BTreeMap::new())
+      .count()
+  }
+
+  #[cfg(feature = "security")]
+  #[test]
+  fn volatile_reader_limits_keep_unread_key_exchange_messages() {
+    // The topic QoS alone (the reader's QoS before the fix) loses the oldest 36.
+    assert_eq!(
+      unread_key_exchange_messages_after_collection(
+        &Discovery::create_participant_volatile_message_secure_qos()
+      ),
+      64
+    );
+    assert_eq!(
+      unread_key_exchange_messages_after_collection(
+        &Discovery::participant_volatile_message_secure_reader_qos()
+      ),
+      100
+    );
+  }
+
   fn keep_all_topic_cache() -> TopicCache {
     TopicCache::new(
       "Square".to_string(),
