@@ -1984,8 +1984,9 @@ impl Discovery {
       .history(History::KeepLast { depth: 4 })
     // Spec says all resource limits should be "LENGTH_UNLIMITED", but that may
     // lead to memory exhaustion. The built-in SEDP readers get finite limits
-    // (see builtin_sedp_reader_qos); the other built-in readers keep the
-    // DDSCache default.
+    // (see builtin_sedp_reader_qos), and so does the key-exchange reader with
+    // security (participant_volatile_message_secure_reader_qos); the other
+    // built-in readers keep the DDSCache default.
   }
 
   pub const fn builtin_subscriber_qos() -> QosPolicies {
