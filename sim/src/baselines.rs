@@ -72,7 +72,9 @@ impl GreedyOrcaFleet {
         Self::with_params(env, p)
     }
 
-    fn with_params(env: &Env, p: obs::orca::OrcaParams) -> Result<Self, SimError> {
+    /// Controllers with explicit parameters (e.g. `orca_params` with `make_room` changed,
+    /// for ablations); refused when [`obs::orca::OrcaParams::validate`] refuses them.
+    pub fn with_params(env: &Env, p: obs::orca::OrcaParams) -> Result<Self, SimError> {
         let one = GreedyOrca::new(p).map_err(|reason| SimError::BadConfig {
             field: "greedy-orca".into(),
             reason,
