@@ -44,6 +44,11 @@ pub struct TrainConfig {
     pub advantage_norm: bool,
     /// Multiply every reward by this before learning (1 = the simulator's rewards).
     pub reward_scale: f32,
+    /// Share of each robot's learning reward that is its environment's mean robot reward
+    /// this step: 0 = its own (the paper), 1 = the team's. The simulator's rewards are per
+    /// robot, so a move that pays only others (an idle robot making room at a storage
+    /// area, ADR 0014) earns the mover nothing at 0.
+    pub team_reward: f32,
     /// MAPPO only: observation padding (actor and critic). Defaults cover the paper's
     /// largest zero-shot setup 42.28_14, so a MAPPO trained on 6.4_2 can be evaluated on
     /// every Table III setup.
@@ -113,6 +118,7 @@ impl Default for TrainConfig {
             use_valuenorm: true,
             advantage_norm: true,
             reward_scale: 1.0,
+            team_reward: 0.0,
             mappo_max_robots: 42,
             mappo_max_machines: 28,
             mappo_max_storages: 14,
@@ -184,6 +190,12 @@ impl TrainConfig {
                     .into(),
             );
         }
+        if !(0.0..=1.0).contains(&self.team_reward) {
+            return Err(format!(
+                "team_reward must lie in [0, 1], got {}",
+                self.team_reward
+            ));
+        }
         if !self.target_greedy_bias.is_finite() {
             return Err(format!(
                 "target_greedy_bias must be finite, got {}",
@@ -191,5 +203,25 @@ impl TrainConfig {
             ));
         }
         Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::TrainConfig;
+
+    #[test]
+    fn team_reward_is_a_share_in_0_to_1() {
+        assert_eq!(TrainConfig::default().team_reward, 0.0);
+        let c = TrainConfig::from_toml("team_reward = 0.5").unwrap();
+        assert_eq!(c.team_reward, 0.5);
+        for bad in [
+            "team_reward = 1.5",
+            "team_reward = -0.1",
+            "team_reward = nan",
+        ] {
+            let e = TrainConfig::from_toml(bad).unwrap_err();
+            assert!(e.contains("team_reward"), "{bad}: {e}");
+        }
     }
 }

@@ -133,12 +133,14 @@ impl Trainer {
                 venv.step_velocities(&vels)?;
             }
             contacts_total += venv.contacts().iter().map(|&c| c as u64).sum::<u64>();
+            let start = buf.rewards.len();
             buf.rewards.extend(
                 venv.rewards()
                     .iter()
                     .zip(venv.contacts())
                     .map(|(r, &c)| (r - lambda * c as f32) * cfg.reward_scale),
             );
+            mix_team_reward(&mut buf.rewards[start..], n, cfg.team_reward);
             for (ei, &d) in venv.done().iter().enumerate() {
                 for i in 0..n {
                     buf.dones.push(d);
@@ -291,5 +293,36 @@ fn filtered_velocities(
         } else {
             pref
         };
+    }
+}
+
+/// Replace each robot's reward r by (1 - w) r + w mean(r of its env) (`team_reward`);
+/// `rewards` is env-major, `n` robots per env. w = 0 leaves the bits unchanged.
+fn mix_team_reward(rewards: &mut [f32], n: usize, w: f32) {
+    if w == 0.0 || n == 0 {
+        return;
+    }
+    for env in rewards.chunks_exact_mut(n) {
+        let mean = env.iter().sum::<f32>() / n as f32;
+        for r in env.iter_mut() {
+            *r = (1.0 - w) * *r + w * mean;
+        }
+    }
+}
+
+#[cfg(test)]
+mod team_reward_tests {
+    use super::mix_team_reward;
+
+    #[test]
+    fn team_reward_mixes_within_each_env_only() {
+        let mut r = [1.0, 3.0, 10.0, 30.0];
+        mix_team_reward(&mut r, 2, 0.0);
+        assert_eq!(r, [1.0, 3.0, 10.0, 30.0]);
+        mix_team_reward(&mut r, 2, 1.0);
+        assert_eq!(r, [2.0, 2.0, 20.0, 20.0]);
+        let mut r = [1.0, 3.0];
+        mix_team_reward(&mut r, 2, 0.5);
+        assert_eq!(r, [1.5, 2.5]);
     }
 }
