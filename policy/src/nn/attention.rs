@@ -171,18 +171,42 @@ dispatch! {
                 sum += *v;
             }
             let inv = 1.0 / sum;
-            let er = &mut eb[hh * e..(hh + 1) * e];
-            er.iter_mut().for_each(|x| *x = 0.0);
-            for j in 0..s {
-                ar[j] *= inv;
-                axpy(er, ar[j], &kr[j * e..(j + 1) * e]);
+            for v in ar.iter_mut() {
+                *v *= inv;
             }
+            weighted_sum(&mut eb[hh * e..(hh + 1) * e], ar, kr, e);
         }
     }
 }
 
+/// er = sum_j w[j] kr[j] (keys of length e), summed in key order from zero. At the
+/// bundled width (64) the sum is kept in a fixed-size accumulator, i.e. in registers,
+/// instead of being stored and reloaded once per key (that store was the hottest
+/// instruction of the forward row kernel); the same additions in the same order.
+#[inline(always)]
+fn weighted_sum(er: &mut [f32], w: &[f32], kr: &[f32], e: usize) {
+    if e == FAST_E {
+        let mut acc = [0.0f32; FAST_E];
+        for (&wj, kj) in w.iter().zip(kr.chunks_exact(FAST_E)) {
+            for l in 0..FAST_E {
+                acc[l] += wj * kj[l];
+            }
+        }
+        er[..FAST_E].copy_from_slice(&acc);
+        return;
+    }
+    er[..e].iter_mut().for_each(|x| *x = 0.0);
+    for (&wj, kj) in w.iter().zip(kr.chunks_exact(e)) {
+        axpy(er, wj, kj);
+    }
+}
+
+/// Embedding width with register-accumulated row kernels (the bundled networks' d_model);
+/// other widths take the general loops, with the same bits.
+const FAST_E: usize = 64;
+
 dispatch! {
-    /// Backward of [`fwd_row`]: writes du (H x E) and dkr (S x E); `ds` is S scratch.
+    /// Backward of [`fwd_row`]: writes du (H x E) and dkr (S x E); `ds` is H x S scratch.
     fn bwd_row(
         a: &[f32],
         de_all: &[f32],
@@ -195,6 +219,9 @@ dispatch! {
         e: usize,
         s: usize,
     ) {
+        if e == FAST_E {
+            return bwd_row_fixed(a, de_all, u, kr, du_all, dkr, ds, h, s);
+        }
         dkr[..s * e].iter_mut().for_each(|x| *x = 0.0);
         for hh in 0..h {
             let ar = &a[hh * s..(hh + 1) * s];
@@ -218,6 +245,57 @@ dispatch! {
                 }
             }
         }
+    }
+}
+
+/// [`bwd_row`] at width [`FAST_E`]: du and each key's gradient accumulated in registers,
+/// the key gradient over the heads in one pass per key (`ds` needs H x S). Every element
+/// gets the same additions in the same order as the general loop: dkr[j] from zero, head
+/// 0's term first; du from zero in key order.
+#[allow(clippy::too_many_arguments)]
+#[inline(always)]
+fn bwd_row_fixed(
+    a: &[f32],
+    de_all: &[f32],
+    u: &[f32],
+    kr: &[f32],
+    du_all: &mut [f32],
+    dkr: &mut [f32],
+    ds: &mut [f32],
+    h: usize,
+    s: usize,
+) {
+    const E: usize = FAST_E;
+    for hh in 0..h {
+        let ar = &a[hh * s..(hh + 1) * s];
+        let de = &de_all[hh * E..(hh + 1) * E];
+        let dsh = &mut ds[hh * s..(hh + 1) * s];
+        let mut mean = 0.0;
+        for j in 0..s {
+            dsh[j] = dot(de, &kr[j * E..(j + 1) * E]);
+            mean += ar[j] * dsh[j];
+        }
+        let mut acc = [0.0f32; E];
+        for j in 0..s {
+            dsh[j] = ar[j] * (dsh[j] - mean);
+            let kj = &kr[j * E..(j + 1) * E];
+            for l in 0..E {
+                acc[l] += dsh[j] * kj[l];
+            }
+        }
+        du_all[hh * E..(hh + 1) * E].copy_from_slice(&acc);
+    }
+    for j in 0..s {
+        let mut acc = [0.0f32; E];
+        for hh in 0..h {
+            let (aj, dsj) = (a[hh * s + j], ds[hh * s + j]);
+            let de = &de_all[hh * E..(hh + 1) * E];
+            let ur = &u[hh * E..(hh + 1) * E];
+            for l in 0..E {
+                acc[l] += aj * de[l] + dsj * ur[l];
+            }
+        }
+        dkr[j * E..(j + 1) * E].copy_from_slice(&acc);
     }
 }
 
@@ -506,7 +584,7 @@ impl MultiHeadAttention {
         let part_len = (k + 1) * e;
         let run = |ci: usize, du_c: &mut [f32], dk_c: &mut [f32]| {
             SCRATCH.with_borrow_mut(|scr| {
-                let need = 2 * s * e + s;
+                let need = 2 * s * e + h * s;
                 if scr.len() < need {
                     scr.resize(need, 0.0);
                 }

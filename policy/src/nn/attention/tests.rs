@@ -263,3 +263,108 @@ fn dot_avx2_has_the_scalar_bits() {
         assert_eq!(want.to_bits(), dot(&a, &b).to_bits());
     }
 }
+
+/// `fwd_row` and `bwd_row` written head by head with a stored accumulator, as they were
+/// before the width-64 kernels kept their sums in registers: the oracles for the bits.
+fn fwd_row_head_by_head(
+    u: &[f32],
+    kr: &[f32],
+    a: &mut [f32],
+    eb: &mut [f32],
+    h: usize,
+    e: usize,
+    s: usize,
+) {
+    for hh in 0..h {
+        let ur = &u[hh * e..(hh + 1) * e];
+        let ar = &mut a[hh * s..(hh + 1) * s];
+        let mut mx = f32::NEG_INFINITY;
+        for j in 0..s {
+            ar[j] = super::dot(ur, &kr[j * e..(j + 1) * e]);
+            mx = mx.max(ar[j]);
+        }
+        for v in ar.iter_mut() {
+            *v = crate::nn::fastmath::exp(*v - mx);
+        }
+        let mut sum = 0.0;
+        for v in ar.iter() {
+            sum += *v;
+        }
+        let inv = 1.0 / sum;
+        let er = &mut eb[hh * e..(hh + 1) * e];
+        er.iter_mut().for_each(|x| *x = 0.0);
+        for j in 0..s {
+            ar[j] *= inv;
+            for (y, k) in er.iter_mut().zip(&kr[j * e..(j + 1) * e]) {
+                *y += ar[j] * k;
+            }
+        }
+    }
+}
+
+#[allow(clippy::too_many_arguments)]
+fn bwd_row_head_by_head(
+    a: &[f32],
+    de_all: &[f32],
+    u: &[f32],
+    kr: &[f32],
+    du_all: &mut [f32],
+    dkr: &mut [f32],
+    h: usize,
+    e: usize,
+    s: usize,
+) {
+    let mut ds = vec![0.0f32; s];
+    dkr[..s * e].iter_mut().for_each(|x| *x = 0.0);
+    for hh in 0..h {
+        let ar = &a[hh * s..(hh + 1) * s];
+        let de = &de_all[hh * e..(hh + 1) * e];
+        let ur = &u[hh * e..(hh + 1) * e];
+        let mut mean = 0.0;
+        for j in 0..s {
+            ds[j] = super::dot(de, &kr[j * e..(j + 1) * e]);
+            mean += ar[j] * ds[j];
+        }
+        let du = &mut du_all[hh * e..(hh + 1) * e];
+        du.iter_mut().for_each(|x| *x = 0.0);
+        for j in 0..s {
+            let dsj = ar[j] * (ds[j] - mean);
+            for (d, k) in du.iter_mut().zip(&kr[j * e..(j + 1) * e]) {
+                *d += dsj * k;
+            }
+            let dkj = &mut dkr[j * e..(j + 1) * e];
+            for i in 0..e {
+                dkj[i] += ar[j] * de[i] + dsj * ur[i];
+            }
+        }
+    }
+}
+
+/// The row kernels at the register-accumulated width (64) and at a general one (24) give
+/// the oracles' bits at every SIMD level.
+#[test]
+fn row_kernels_have_the_head_by_head_bits_at_every_level() {
+    let bits = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+    for (h, e, s) in [(4, 64, 99), (2, 24, 7)] {
+        let kr = rand_vec(s * e, 4);
+        let u = rand_vec(h * e, 8);
+        let (mut a0, mut eb0) = (vec![0.0; h * s], vec![0.0; h * e]);
+        fwd_row_head_by_head(&u, &kr, &mut a0, &mut eb0, h, e, s);
+        let de = rand_vec(h * e, 2);
+        let (mut du0, mut dk0) = (vec![0.0; h * e], vec![0.0; s * e]);
+        bwd_row_head_by_head(&a0, &de, &u, &kr, &mut du0, &mut dk0, h, e, s);
+        let runs = crate::nn::simd::tests::at_every_level(|| {
+            let (mut a, mut eb) = (vec![1.0; h * s], vec![1.0; h * e]);
+            super::fwd_row(&u, &kr, &mut a, &mut eb, h, e, s);
+            let (mut du, mut dk, mut ds) = (vec![1.0; h * e], vec![1.0; s * e], vec![0.0; h * s]);
+            super::bwd_row(&a, &de, &u, &kr, &mut du, &mut dk, &mut ds, h, e, s);
+            (a, eb, du, dk)
+        });
+        for (a, eb, du, dk) in runs {
+            assert_eq!(bits(&a), bits(&a0), "a, e {e}");
+            assert_eq!(bits(&eb), bits(&eb0), "eb, e {e}");
+            assert_eq!(bits(&du), bits(&du0), "du, e {e}");
+            assert_eq!(bits(&dk), bits(&dk0), "dk, e {e}");
+        }
+    }
+}
