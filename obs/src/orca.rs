@@ -495,8 +495,9 @@ mod tests {
     fn idle_robot_makes_room_at_a_storage() {
         let c = GreedyOrca::new(params()).unwrap();
         let busy = [0.8, 0.0, 0.0];
-        let half = params().greedy.storage_half; // [0.15, 0.08]
-                                                 // storage centre 0.1 m above the robot: its surface is 0.02 m away
+        // storage half size [0.15, 0.08]; its centre 0.1 m above the robot, so its
+        // surface is 0.02 m away
+        let half = params().greedy.storage_half;
         let near = [0.0, 0.1];
         let v = c.greedy_preferred(&[0.0, 0.0, 0.0], &busy, &near, &[]);
         assert!(v[1] < -0.49 && v[0].abs() < 1e-6, "{v:?}");
