@@ -227,12 +227,7 @@ dispatch! {
             let ar = &a[hh * s..(hh + 1) * s];
             let de = &de_all[hh * e..(hh + 1) * e];
             let ur = &u[hh * e..(hh + 1) * e];
-            // dA_j and its softmax-weighted mean
-            let mut mean = 0.0;
-            for j in 0..s {
-                ds[j] = dot(de, &kr[j * e..(j + 1) * e]);
-                mean += ar[j] * ds[j];
-            }
+            let mean = score_grads(de, kr, ar, &mut ds[..s], e);
             let du = &mut du_all[hh * e..(hh + 1) * e];
             du.iter_mut().for_each(|x| *x = 0.0);
             for j in 0..s {
@@ -246,6 +241,19 @@ dispatch! {
             }
         }
     }
+}
+
+/// One head's score gradients dA_j = de . k_j into `ds` (one per key of `kr`, width `e`),
+/// returning their softmax-weighted mean sum_j a_j dA_j (summed in key order). Shared by
+/// both [`bwd_row`] paths so they form these the same way.
+#[inline(always)]
+fn score_grads(de: &[f32], kr: &[f32], a: &[f32], ds: &mut [f32], e: usize) -> f32 {
+    let mut mean = 0.0;
+    for (j, d) in ds.iter_mut().enumerate() {
+        *d = dot(de, &kr[j * e..(j + 1) * e]);
+        mean += a[j] * *d;
+    }
+    mean
 }
 
 /// [`bwd_row`] at width [`FAST_E`]: du and each key's gradient accumulated in registers,
@@ -270,11 +278,7 @@ fn bwd_row_fixed(
         let ar = &a[hh * s..(hh + 1) * s];
         let de = &de_all[hh * E..(hh + 1) * E];
         let dsh = &mut ds[hh * s..(hh + 1) * s];
-        let mut mean = 0.0;
-        for j in 0..s {
-            dsh[j] = dot(de, &kr[j * E..(j + 1) * E]);
-            mean += ar[j] * dsh[j];
-        }
+        let mean = score_grads(de, kr, ar, dsh, E);
         let mut acc = [0.0f32; E];
         for j in 0..s {
             dsh[j] = ar[j] * (dsh[j] - mean);
