@@ -76,14 +76,7 @@ pub fn greedy_target(
                 continue;
             }
             let mine = m[0] * m[0] + m[1] * m[1];
-            // Claimed if a part-less peer is nearer to this machine than I am.
-            let claimed = peers.chunks_exact(3).any(|q| {
-                q[2] < 0.5 && {
-                    let (dx, dy) = (m[0] - q[0], m[1] - q[1]);
-                    dx * dx + dy * dy < mine
-                }
-            });
-            if !claimed && mine < best {
+            if !claimed_by_a_nearer_peer(m, peers) && mine < best {
                 best = mine;
                 target = Some(Target {
                     rel: [m[0], m[1]],
@@ -93,6 +86,18 @@ pub fn greedy_target(
         }
     }
     target
+}
+
+/// Whether a part-less peer is nearer than this robot to machine `m` (a machine row,
+/// relative (dx, dy) first): greedy's claim rule, shared with the target menu.
+pub fn claimed_by_a_nearer_peer(m: &[f32], peers: &[f32]) -> bool {
+    let mine = m[0] * m[0] + m[1] * m[1];
+    peers.chunks_exact(3).any(|q| {
+        q[2] < 0.5 && {
+            let (dx, dy) = (m[0] - q[0], m[1] - q[1]);
+            dx * dx + dy * dy < mine
+        }
+    })
 }
 
 /// Decentralized greedy: heads for [`greedy_target`]. Moves on one axis

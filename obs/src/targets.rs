@@ -13,7 +13,7 @@
 //! A target that does not exist on this step (no second ready machine, one storage) means
 //! "stay": the policy sees the flags and counts, and learns not to ask for it.
 
-use crate::greedy::{greedy_target, GreedyParams, Target};
+use crate::greedy::{claimed_by_a_nearer_peer, greedy_target, GreedyParams, Target};
 use crate::{MACHINE_DIM, PEER_DIM, STORAGE_DIM};
 
 /// Number of target actions.
@@ -32,7 +32,9 @@ pub enum TargetAction {
     NearestReady = 2,
     /// Second-nearest machine with a ready part.
     SecondReady = 3,
-    /// Nearest machine without a ready part: wait there for the next one.
+    /// Nearest machine without a ready part that no nearer part-less peer claims (greedy's
+    /// claim rule): wait there for the next one. Claim-aware since ADR 0015: without the
+    /// claim, half of an idle fleet queued at the same few busy machines.
     NearestBusy = 4,
     /// Nearest storage area.
     NearestStorage = 5,
@@ -102,7 +104,13 @@ pub fn target(
         }
         NearestReady => machine(true, 0),
         SecondReady => machine(true, 1),
-        NearestBusy => machine(false, 0),
+        NearestBusy => nth_nearest(machines, MACHINE_DIM, 0, |m| {
+            m[2] < 0.5 && !claimed_by_a_nearer_peer(m, peers)
+        })
+        .map(|rel| Target {
+            rel,
+            half: p.machine_half,
+        }),
         NearestStorage => storage(0),
         SecondStorage => storage(1),
     }
@@ -189,6 +197,26 @@ mod tests {
         // With a part, greedy goes to the nearest storage.
         let loaded = [0.0, 0.0, 1.0];
         assert_eq!(rel(TargetAction::Greedy, &loaded, &[]), Some([0.0, -0.4]));
+    }
+
+    #[test]
+    fn a_busy_machine_a_nearer_peer_claims_is_not_offered() {
+        let own = [0.0, 0.0, 0.0];
+        assert_eq!(rel(TargetAction::NearestBusy, &own, &[]), Some([0.3, 0.0]));
+        // A part-less peer nearer to the busy machine claims it; no other busy machine.
+        let empty_peer = [0.35, 0.05, 0.0];
+        assert_eq!(rel(TargetAction::NearestBusy, &own, &empty_peer), None);
+        // A peer carrying a part claims nothing, and a farther one does not either.
+        let loaded_peer = [0.35, 0.05, 1.0];
+        assert_eq!(
+            rel(TargetAction::NearestBusy, &own, &loaded_peer),
+            Some([0.3, 0.0])
+        );
+        let far_peer = [-0.5, 0.0, 0.0];
+        assert_eq!(
+            rel(TargetAction::NearestBusy, &own, &far_peer),
+            Some([0.3, 0.0])
+        );
     }
 
     #[test]
