@@ -3,6 +3,12 @@
 every learned method, parts vs the best scripted baseline (greedy, greedy-orca), contact
 steps vs the scripted baseline with the fewest, robot-robot contacts per robot-step.
 
+The "ceiling" column is the most any policy could deliver relative to the best script:
+P_max / best script parts, where P_max = machines x ceil(episode_steps / prep_steps) is the
+number of parts the machines make if none ever waits for a pickup (sim::Metrics::p_max;
+the default scenario's 200 steps and 20 prep steps, which `tending eval` runs unless given
+--config). Where it is below 1.1, the 1.1x target cannot be met by any policy.
+
 Usage: targets.py DIR  (DIR/<method>/results.csv, one row per setup and seed).
 Prints Markdown. Standard library only."""
 import csv
@@ -12,6 +18,8 @@ from pathlib import Path
 from statistics import mean
 
 SCRIPTS = ("greedy", "greedy-orca")
+# The default scenario's (sim/src/config.rs): parts per machine with no waiting.
+PARTS_PER_MACHINE = -(-200 // 20)
 
 
 def setup_key(s):
@@ -35,9 +43,9 @@ def main(root):
 
     learned = [x for x in rows if x not in SCRIPTS]
     setups = sorted({s for x in rows.values() for s in x}, key=setup_key)
-    print("| setup | method | parts | x best script | contacts | fewest script | "
+    print("| setup | method | parts | x best script | ceiling | contacts | fewest script | "
           "robot-robot / robot-step | targets met |")
-    print("|---|---|---|---|---|---|---|---|")
+    print("|---|---|---|---|---|---|---|---|---|")
     met = defaultdict(int)
     counted = defaultdict(int)
     for s in setups:
@@ -45,9 +53,11 @@ def main(root):
             continue
         best = max(m(x, s, "parts_delivered") for x in SCRIPTS)
         fewest = min(m(x, s, "collisions") for x in SCRIPTS)
+        ceiling = setup_key(s)[1] * PARTS_PER_MACHINE / best
         for x in SCRIPTS:
             print(f"| {s} | {x} | {m(x, s, 'parts_delivered'):.1f} | "
-                  f"{m(x, s, 'parts_delivered') / best:.2f} | {m(x, s, 'collisions'):.1f} | "
+                  f"{m(x, s, 'parts_delivered') / best:.2f} | {ceiling:.2f} | "
+                  f"{m(x, s, 'collisions'):.1f} | "
                   f"{fewest:.1f} | {m(x, s, 'robot_robot_per_robot_step'):.4f} | script |")
         for x in learned:
             if s not in rows[x]:
@@ -59,11 +69,14 @@ def main(root):
             counted[x] += 1
             met[x] += all(ok)
             marks = "".join("y" if o else "n" for o in ok)
-            print(f"| {s} | {x} | {parts:.1f} | {parts / best:.2f} | {contacts:.1f} | "
+            print(f"| {s} | {x} | {parts:.1f} | {parts / best:.2f} | {ceiling:.2f} | "
+                  f"{contacts:.1f} | "
                   f"{fewest:.1f} | {rr:.4f} | {marks} |")
     print()
     print("targets met = parts >= 1.1x best script / contacts <= fewest script / "
-          "robot-robot <= 0.01 per robot-step (y or n each).")
+          "robot-robot <= 0.01 per robot-step (y or n each). ceiling = P_max / best "
+          "script's parts: no policy can exceed it (below 1.10: the parts target is "
+          "out of reach on that setup).")
     print()
     for x in learned:
         print(f"- {x}: all three targets met on {met[x]} of {counted[x]} setups")
