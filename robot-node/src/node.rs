@@ -45,6 +45,15 @@ pub fn make_controller(p: &Params) -> anyhow::Result<(Box<dyn Controller>, f64)>
                 anyhow!("controller `policy` needs a checkpoint: -p policy:=PATH")
             })?;
             let (mut c, from_meta) = PolicyController::load(path, p.k_speed as f32)?;
+            let filter_on = p.orca_filter.unwrap_or(!p.shield);
+            // `tending eval`'s parameters (OrcaParams::for_policy): the planner shares the
+            // filter's clearance (its stand-off at a box follows it), greedy-ORCA's without.
+            let clearance = if filter_on {
+                p.orca_clearance as f32
+            } else {
+                obs::orca::GREEDY_ORCA_CLEARANCE
+            };
+            let op = crate::controller::orca_params(p).for_policy(clearance);
             if c.has_target_actions() {
                 anyhow::ensure!(
                     !p.shield,
@@ -52,7 +61,7 @@ pub fn make_controller(p: &Params) -> anyhow::Result<(Box<dyn Controller>, f64)>
                      velocity moves: use the ORCA filter (the default) instead",
                     path.display()
                 );
-                c = c.with_target_planner(crate::controller::orca_params(p))?;
+                c = c.with_target_planner(op)?;
             }
             if p.shield {
                 c = c.with_shield(crate::controller::shield_params(p));
@@ -61,9 +70,8 @@ pub fn make_controller(p: &Params) -> anyhow::Result<(Box<dyn Controller>, f64)>
             // through the ORCA filter unless `orca_filter:=false`; the shield, when asked
             // for, replaces it (the rules `tending eval --orca-filter/--shield` reproduce).
             let trained = c.trained_with_orca_filter();
-            if p.orca_filter.unwrap_or(!p.shield) {
+            if filter_on {
                 info!("policy commands pass through the ORCA safety filter");
-                let op = crate::controller::orca_params(p).with_clearance(p.orca_clearance as f32);
                 c = c.with_orca_filter(op)?;
             } else if trained {
                 tracing::warn!(

@@ -55,25 +55,25 @@ fn offline_filtered(setup: Setup, seed: u64, steps: u32, path: &std::path::Path)
     .0
 }
 
-/// The bundled target-action policy as robot_node runs it by default: the chosen box as a
-/// straight-line velocity (`obs::targets`), through the 40 mm ORCA filter.
+/// The bundled target-action policy as robot_node runs it by default and `tending eval`
+/// evaluates it: the chosen box as a straight-line velocity (`obs::targets`) planned and
+/// filtered by one fleet with the policy's parameters (40 mm clearance, its make-room).
 fn offline_targets(setup: Setup, seed: u64, steps: u32, path: &std::path::Path) -> Offline {
     let init = |env: &Env| {
         let fleet =
             sim::baselines::GreedyOrcaFleet::new_filter(env, obs::orca::FILTER_CLEARANCE).unwrap();
-        let planner = sim::baselines::GreedyOrcaFleet::new(env).unwrap();
         let (pol, states) = policy_with_states(path, env);
         assert_eq!(pol.actor().arch.actions, policy::ActionSpace::Targets);
-        (fleet, planner, pol, states, Vec::new(), Vec::new())
+        (fleet, pol, states, Vec::new(), Vec::new())
     };
     offline_episode(
         setup,
         seed,
         steps,
         init,
-        |(fleet, planner, pol, states, prefs, vels), batch, env| {
+        |(fleet, pol, states, prefs, vels), batch, env| {
             let acts = greedy_policy_actions(pol, states, batch);
-            planner.target_velocities(batch, &acts, prefs).unwrap();
+            fleet.target_velocities(batch, &acts, prefs).unwrap();
             fleet.filter(batch, prefs, vels).unwrap();
             env.step_velocities(vels).unwrap();
         },

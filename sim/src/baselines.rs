@@ -65,10 +65,12 @@ impl GreedyOrcaFleet {
         Self::with_params(env, orca_params(env.sizes(), env.config()))
     }
 
-    /// Safety filters for every robot of `env`: greedy-ORCA's parameters with the peer
-    /// clearance `clearance` (`obs::orca::FILTER_CLEARANCE` by default).
+    /// Safety filters (and target planners) for every robot of `env`: greedy-ORCA's
+    /// parameters as a learned policy runs behind them ([`obs::orca::OrcaParams::for_policy`]:
+    /// the peer clearance `clearance`, `obs::orca::FILTER_CLEARANCE` by default, and the
+    /// policy's make-room distance).
     pub fn new_filter(env: &Env, clearance: f32) -> Result<Self, SimError> {
-        let p = orca_params(env.sizes(), env.config()).with_clearance(clearance);
+        let p = orca_params(env.sizes(), env.config()).for_policy(clearance);
         Self::with_params(env, p)
     }
 

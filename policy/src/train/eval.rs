@@ -89,7 +89,12 @@ pub fn run_episode_watched(
         Controller::Filtered { clearance, .. } => {
             Some(GreedyOrcaFleet::new_filter(&env, *clearance)?)
         }
-        Controller::Learned { .. } if targets => Some(GreedyOrcaFleet::new(&env)?),
+        // Without the filter a target policy still plans with the policy's make-room
+        // distance; its peer clearance is then greedy-ORCA's (unused without filtering).
+        Controller::Learned { .. } if targets => Some(GreedyOrcaFleet::new_filter(
+            &env,
+            obs::orca::GREEDY_ORCA_CLEARANCE,
+        )?),
         _ => None,
     };
     let mut vels = Vec::with_capacity(n);

@@ -8,7 +8,7 @@ use super::trainer::estimate_train_bytes;
 use super::*;
 use crate::config::ModelKind;
 use rand::{Rng, SeedableRng};
-use sim::{ScenarioConfig, Setup};
+use sim::{Env, ScenarioConfig, Setup};
 
 fn tmp(name: &str) -> std::path::PathBuf {
     let d = std::env::temp_dir().join(format!("policy-train-{}", std::process::id()));
@@ -701,9 +701,10 @@ fn diagonal_actions_train_and_evaluate() {
 
 /// `target_actions = true`: a 7-action actor whose checkpoint says so; with an
 /// overwhelming bias on the "greedy" entry, evaluated behind the filter at greedy-ORCA's
-/// clearance, it is greedy-ORCA step for step (same metrics), so the menu's first real
-/// entry is the script; raw (no filter) it drives straight and runs too; the shield and
-/// bad combinations are refused.
+/// clearance, it is greedy-ORCA with the policy's planner parameters step for step (same
+/// metrics; the policy's make-room distance is its own, `POLICY_MAKE_ROOM_RADII`), so the
+/// menu's first real entry is the script; raw (no filter) it drives straight and runs
+/// too; the shield and bad combinations are refused.
 #[test]
 fn target_actions_contain_greedy_orca() {
     let mut t = crowded(TrainConfig {
@@ -732,10 +733,24 @@ fn target_actions_contain_greedy_orca() {
         sample: false,
         clearance: obs::orca::GREEDY_ORCA_CLEARANCE,
     };
+    // greedy-ORCA as `tending eval` runs it, but planning with the policy's parameters.
+    let script = |ep: u64| {
+        let mut env =
+            Env::new(sc.clone(), setup, crate::train::eval::eval_env_seed(0, ep)).unwrap();
+        let p = sim::baselines::orca_params(env.sizes(), &sc)
+            .for_policy(obs::orca::GREEDY_ORCA_CLEARANCE);
+        let mut fleet = sim::baselines::GreedyOrcaFleet::with_params(&env, p).unwrap();
+        let (mut batch, mut vels) = (obs::ObsBatch::default(), Vec::new());
+        while !env.is_done() {
+            env.observe(&mut batch);
+            fleet.act(&batch, &mut vels).unwrap();
+            env.step_velocities(&vels).unwrap();
+        }
+        *env.metrics()
+    };
     for ep in 0..3 {
         let a = run_episode(&filtered, &sc, setup, 0, ep).unwrap();
-        let b = run_episode(&Controller::GreedyOrca, &sc, setup, 0, ep).unwrap();
-        assert_eq!(a, b, "episode {ep}");
+        assert_eq!(a, script(ep), "episode {ep}");
     }
     let raw = Controller::Learned {
         actor: Box::new(always_greedy),

@@ -256,7 +256,7 @@ fn velocity_filters(
 ) -> Result<Vec<GreedyOrca>, TrainError> {
     if cfg.orca_filter || cfg.target_actions {
         let p = sim::baselines::orca_params(venv.envs()[0].sizes(), scenario)
-            .with_clearance(cfg.orca_filter_clearance);
+            .for_policy(cfg.orca_filter_clearance);
         let one = GreedyOrca::new(p).map_err(|reason| {
             TrainError::Config(format!("orca_filter: ORCA parameters: {reason}"))
         })?;
