@@ -62,7 +62,23 @@ pub fn run_episode_watched(
     setup: Setup,
     seed: u64,
     episode: u64,
+    on_step: impl FnMut(&Env),
+) -> Result<Metrics, TrainError> {
+    run_episode_hooked(ctrl, cfg, setup, seed, episode, on_step, |_, _| {})
+}
+
+/// [`run_episode_watched`], also showing `on_actions` each step's observation and the
+/// discrete actions chosen on it (greedy and learned controllers; the random controller
+/// observes nothing, so its batch is empty; greedy-ORCA chooses no discrete action and
+/// never calls it). `policy/examples/menu_use.rs` counts menu entries with it.
+pub fn run_episode_hooked(
+    ctrl: &Controller,
+    cfg: &ScenarioConfig,
+    setup: Setup,
+    seed: u64,
+    episode: u64,
     mut on_step: impl FnMut(&Env),
+    mut on_actions: impl FnMut(&obs::ObsBatch, &[u8]),
 ) -> Result<Metrics, TrainError> {
     let mut env = Env::new(cfg.clone(), setup, eval_env_seed(seed, episode))?;
     let mut rng = ChaCha8Rng::seed_from_u64(episode_seed(seed ^ 0x0005_EED0_FAC7, 1, episode));
@@ -155,6 +171,7 @@ pub fn run_episode_watched(
                 }
             }
         }
+        on_actions(&obs, &actions);
         if let Some(orca) = orca.as_mut().filter(|_| targets) {
             orca.target_velocities(&obs, &actions, &mut prefs)?;
             if matches!(ctrl, Controller::Filtered { .. }) {
