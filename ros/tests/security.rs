@@ -116,11 +116,13 @@ fn enclaves_talk_and_a_participant_without_security_sees_and_moves_nothing() {
         subscription::<PoseStamped>(&mut stranger, "/robot_9/pose", Profile::RobotStream).unwrap();
     let mut control = 0;
 
-    // Until the secure pair has matched (authentication, key exchange), then 1 s more.
+    // Until the secure pair has matched (authentication, key exchange) and the control
+    // reader has seen the open participant: the secure pair can finish first, and then
+    // stopping would leave the control at 0 (a fresh-clone run failed that way).
     let t0 = Instant::now();
     let (mut robot_got, mut bridge_got, mut spy_got) = (0, 0, 0);
     while t0.elapsed() < Duration::from_secs(15)
-        && (robot_got < 20 || bridge_got < 20 || flags_got < 20)
+        && (robot_got < 20 || bridge_got < 20 || flags_got < 20 || control == 0)
     {
         let _ = pose_pub.publish(pose(1.0));
         let _ = flag_pub.publish(Bool { data: true });
