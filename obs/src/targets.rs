@@ -84,12 +84,14 @@ pub fn target(
     p: &GreedyParams,
 ) -> Option<Target> {
     use TargetAction::*;
-    let machine = |want_ready: bool, rank: usize| {
-        nth_nearest(machines, MACHINE_DIM, rank, |m| (m[2] > 0.5) == want_ready).map(|rel| Target {
+    // The `rank`-th nearest machine that `keep` accepts.
+    let machine = |rank: usize, keep: &dyn Fn(&[f32]) -> bool| {
+        nth_nearest(machines, MACHINE_DIM, rank, keep).map(|rel| Target {
             rel,
             half: p.machine_half,
         })
     };
+    let ready = |m: &[f32]| m[2] > 0.5;
     let storage = |rank: usize| {
         nth_nearest(storages, STORAGE_DIM, rank, |_| true).map(|rel| Target {
             rel,
@@ -102,15 +104,9 @@ pub fn target(
             debug_assert_eq!(peers.len() % PEER_DIM, 0);
             greedy_target(own, machines, storages, peers, p)
         }
-        NearestReady => machine(true, 0),
-        SecondReady => machine(true, 1),
-        NearestBusy => nth_nearest(machines, MACHINE_DIM, 0, |m| {
-            m[2] < 0.5 && !claimed_by_a_nearer_peer(m, peers)
-        })
-        .map(|rel| Target {
-            rel,
-            half: p.machine_half,
-        }),
+        NearestReady => machine(0, &ready),
+        SecondReady => machine(1, &ready),
+        NearestBusy => machine(0, &|m| !ready(m) && !claimed_by_a_nearer_peer(m, peers)),
         NearestStorage => storage(0),
         SecondStorage => storage(1),
     }
