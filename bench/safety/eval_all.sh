@@ -5,6 +5,11 @@
 # Methods: greedy, greedy-orca, targets (the bundled target-action policy, behind the
 # filter it was trained with), smappo, smappo-orca, smappo-shield (the paper's 5-move
 # policy, smappo_moves_6.4_2), and any NAME=CHECKPOINT[:orca|:shield] for a new checkpoint.
+# The setups issue 10 does not name (docs/RESULTS.md 7.5-7.6):
+#   SETUPS=3.3_1,8.6_3,10.4_2,20.10_4,50.20_5,75.30_10 OUT=docs/safety/eval_extra \
+#     TABLE=docs/safety/eval_extra/targets.md PARETO= bench/safety/eval_all.sh greedy greedy-orca targets
+#   SETUPS=2.8_1,3.1_1,5.10_2,16.4_1,30.6_1,40.40_2,60.12_3,64.32_16,80.40_4,90.20_3,100.8_1,100.50_10 \
+#     OUT=docs/safety/eval_wide TABLE=docs/safety/eval_wide/targets.md PARETO= bench/safety/eval_all.sh greedy greedy-orca targets
 set -euo pipefail
 cd "$(dirname "$0")/../.."
 bin="${TENDING_BIN:-target/release/tending}"
@@ -34,6 +39,13 @@ for m in "${methods[@]}"; do
     echo "== $m: ${args[*]}"
     "$bin" eval "${args[@]}" --setups "$setups" --episodes 50 --seeds 0,1,2 --out "$out/$m"
 done
-python3 bench/safety/targets.py "$out" > docs/safety/targets.md
-"$bin" plot pareto "$out"/*/results.csv --out docs/safety/pareto.png
-echo "wrote docs/safety/targets.md and docs/safety/pareto.png"
+# Other setup lists (OUT=docs/safety/eval_extra, docs/safety/eval_wide) get their table
+# beside their results and no Pareto plot: TABLE=$OUT/targets.md PARETO=.
+table="${TABLE:-docs/safety/targets.md}"
+pareto="${PARETO-docs/safety/pareto.png}"
+python3 bench/safety/targets.py "$out" > "$table"
+echo "wrote $table"
+if [ -n "$pareto" ]; then
+    "$bin" plot pareto "$out"/*/results.csv --out "$pareto"
+    echo "wrote $pareto"
+fi

@@ -28,7 +28,9 @@ pub enum TargetAction {
     /// The greedy script's choice ([`greedy_target`]): nearest unclaimed ready machine, or
     /// the nearest storage with a part. A policy that always picks it is greedy-ORCA.
     Greedy = 1,
-    /// Nearest machine with a ready part, claimed by a nearer peer or not.
+    /// Nearest machine with a ready part that no nearer part-less peer claims (greedy's
+    /// claim rule). Claim-aware since ADR 0017: contesting a claimed machine cost up to a
+    /// quarter of the parts on machine-rich, storage-bound setups (80.40_4, 40.40_2).
     NearestReady = 2,
     /// Second-nearest machine with a ready part.
     SecondReady = 3,
@@ -104,7 +106,7 @@ pub fn target(
             debug_assert_eq!(peers.len() % PEER_DIM, 0);
             greedy_target(own, machines, storages, peers, p)
         }
-        NearestReady => machine(0, &ready),
+        NearestReady => machine(0, &|m| ready(m) && !claimed_by_a_nearer_peer(m, peers)),
         SecondReady => machine(1, &ready),
         NearestBusy => machine(0, &|m| !ready(m) && !claimed_by_a_nearer_peer(m, peers)),
         NearestStorage => storage(0),
@@ -185,11 +187,6 @@ mod tests {
         let peers = [0.0, 0.45, 0.0];
         assert_eq!(rel(TargetAction::Greedy, &own, &[]), Some([0.0, 0.5]));
         assert_eq!(rel(TargetAction::Greedy, &own, &peers), Some([1.0, 0.0]));
-        // NearestReady ignores the claim.
-        assert_eq!(
-            rel(TargetAction::NearestReady, &own, &peers),
-            Some([0.0, 0.5])
-        );
         // With a part, greedy goes to the nearest storage.
         let loaded = [0.0, 0.0, 1.0];
         assert_eq!(rel(TargetAction::Greedy, &loaded, &[]), Some([0.0, -0.4]));
@@ -213,6 +210,32 @@ mod tests {
             rel(TargetAction::NearestBusy, &own, &far_peer),
             Some([0.3, 0.0])
         );
+    }
+
+    #[test]
+    fn a_ready_machine_a_nearer_peer_claims_is_not_offered() {
+        let own = [0.0, 0.0, 0.0];
+        // A part-less peer nearer to the near ready machine claims it (ADR 0017): the
+        // entry names the next unclaimed ready machine, as greedy does.
+        let empty_peer = [0.0, 0.45, 0.0];
+        assert_eq!(
+            rel(TargetAction::NearestReady, &own, &empty_peer),
+            Some([1.0, 0.0])
+        );
+        // A peer carrying a part claims nothing.
+        let loaded_peer = [0.0, 0.45, 1.0];
+        assert_eq!(
+            rel(TargetAction::NearestReady, &own, &loaded_peer),
+            Some([0.0, 0.5])
+        );
+        // The second-nearest entry still ranks every ready machine, claimed or not.
+        assert_eq!(
+            rel(TargetAction::SecondReady, &own, &empty_peer),
+            Some([1.0, 0.0])
+        );
+        // Every ready machine claimed: the entry is missing (stay, ADR 0014).
+        let two_peers = [0.0, 0.45, 0.0, 0.95, 0.0, 0.0];
+        assert_eq!(rel(TargetAction::NearestReady, &own, &two_peers), None);
     }
 
     #[test]

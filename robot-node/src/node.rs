@@ -46,14 +46,9 @@ pub fn make_controller(p: &Params) -> anyhow::Result<(Box<dyn Controller>, f64)>
             })?;
             let (mut c, from_meta) = PolicyController::load(path, p.k_speed as f32)?;
             let filter_on = p.orca_filter.unwrap_or(!p.shield);
-            // `tending eval`'s parameters (OrcaParams::for_policy): the planner shares the
-            // filter's clearance (its stand-off at a box follows it), greedy-ORCA's without.
-            let clearance = if filter_on {
-                p.orca_clearance as f32
-            } else {
-                obs::orca::GREEDY_ORCA_CLEARANCE
-            };
-            let op = crate::controller::orca_params(p).for_policy(clearance);
+            // `tending eval`'s parameters (OrcaParams::for_policy).
+            let filter = filter_on.then_some(p.orca_clearance as f32);
+            let op = crate::controller::orca_params(p).for_policy(filter);
             if c.has_target_actions() {
                 anyhow::ensure!(
                     !p.shield,

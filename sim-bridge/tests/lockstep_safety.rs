@@ -34,7 +34,8 @@ fn offline_greedy_orca(setup: Setup, seed: u64, steps: u32) -> (Offline, Env) {
 fn offline_filtered(setup: Setup, seed: u64, steps: u32, path: &std::path::Path) -> Offline {
     let init = |env: &Env| {
         let fleet =
-            sim::baselines::GreedyOrcaFleet::new_filter(env, obs::orca::FILTER_CLEARANCE).unwrap();
+            sim::baselines::GreedyOrcaFleet::new_filter(env, Some(obs::orca::FILTER_CLEARANCE))
+                .unwrap();
         let k = env.config().task.k_speed;
         (fleet, k, policy_with_states(path, env), Vec::new())
     };
@@ -61,7 +62,8 @@ fn offline_filtered(setup: Setup, seed: u64, steps: u32, path: &std::path::Path)
 fn offline_targets(setup: Setup, seed: u64, steps: u32, path: &std::path::Path) -> Offline {
     let init = |env: &Env| {
         let fleet =
-            sim::baselines::GreedyOrcaFleet::new_filter(env, obs::orca::FILTER_CLEARANCE).unwrap();
+            sim::baselines::GreedyOrcaFleet::new_filter(env, Some(obs::orca::FILTER_CLEARANCE))
+                .unwrap();
         let (pol, states) = policy_with_states(path, env);
         assert_eq!(pol.actor().arch.actions, policy::ActionSpace::Targets);
         (fleet, pol, states, Vec::new(), Vec::new())

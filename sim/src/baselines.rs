@@ -67,10 +67,10 @@ impl GreedyOrcaFleet {
 
     /// Safety filters (and target planners) for every robot of `env`: greedy-ORCA's
     /// parameters as a learned policy runs behind them ([`obs::orca::OrcaParams::for_policy`]:
-    /// the peer clearance `clearance`, `obs::orca::FILTER_CLEARANCE` by default, and the
-    /// policy's make-room distance).
-    pub fn new_filter(env: &Env, clearance: f32) -> Result<Self, SimError> {
-        let p = orca_params(env.sizes(), env.config()).for_policy(clearance);
+    /// the filter's peer clearance `filter_clearance`, `obs::orca::FILTER_CLEARANCE` by
+    /// default, or None for a target policy's planner without the filter).
+    pub fn new_filter(env: &Env, filter_clearance: Option<f32>) -> Result<Self, SimError> {
+        let p = orca_params(env.sizes(), env.config()).for_policy(filter_clearance);
         Self::with_params(env, p)
     }
 

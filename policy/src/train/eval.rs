@@ -103,14 +103,10 @@ pub fn run_episode_hooked(
     let mut orca = match ctrl {
         Controller::GreedyOrca => Some(GreedyOrcaFleet::new(&env)?),
         Controller::Filtered { clearance, .. } => {
-            Some(GreedyOrcaFleet::new_filter(&env, *clearance)?)
+            Some(GreedyOrcaFleet::new_filter(&env, Some(*clearance))?)
         }
-        // Without the filter a target policy still plans with the policy's make-room
-        // distance; its peer clearance is then greedy-ORCA's (unused without filtering).
-        Controller::Learned { .. } if targets => Some(GreedyOrcaFleet::new_filter(
-            &env,
-            obs::orca::GREEDY_ORCA_CLEARANCE,
-        )?),
+        // Without the filter a target policy still plans with the policy's parameters.
+        Controller::Learned { .. } if targets => Some(GreedyOrcaFleet::new_filter(&env, None)?),
         _ => None,
     };
     let mut vels = Vec::with_capacity(n);

@@ -737,8 +737,7 @@ fn target_actions_contain_greedy_orca() {
     let script = |ep: u64| {
         let mut env =
             Env::new(sc.clone(), setup, crate::train::eval::eval_env_seed(0, ep)).unwrap();
-        let p = sim::baselines::orca_params(env.sizes(), &sc)
-            .for_policy(obs::orca::GREEDY_ORCA_CLEARANCE);
+        let p = sim::baselines::orca_params(env.sizes(), &sc).for_policy(None);
         let mut fleet = sim::baselines::GreedyOrcaFleet::with_params(&env, p).unwrap();
         let (mut batch, mut vels) = (obs::ObsBatch::default(), Vec::new());
         while !env.is_done() {

@@ -255,14 +255,8 @@ fn velocity_filters(
     b: usize,
 ) -> Result<Vec<GreedyOrca>, TrainError> {
     if cfg.orca_filter || cfg.target_actions {
-        // As `tending eval` and robot_node plan: the filter's clearance when filtering,
-        // greedy-ORCA's when target actions drive straight without it.
-        let clearance = if cfg.orca_filter {
-            cfg.orca_filter_clearance
-        } else {
-            obs::orca::GREEDY_ORCA_CLEARANCE
-        };
-        let p = sim::baselines::orca_params(venv.envs()[0].sizes(), scenario).for_policy(clearance);
+        let filter = cfg.orca_filter.then_some(cfg.orca_filter_clearance);
+        let p = sim::baselines::orca_params(venv.envs()[0].sizes(), scenario).for_policy(filter);
         let one = GreedyOrca::new(p).map_err(|reason| {
             TrainError::Config(format!("orca_filter: ORCA parameters: {reason}"))
         })?;
