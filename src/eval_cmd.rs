@@ -44,7 +44,8 @@ pub struct EvalArgs {
     /// runs it).
     #[arg(long, requires = "checkpoint", conflicts_with = "orca_filter")]
     pub no_orca_filter: bool,
-    /// Peer clearance of the ORCA filter, m (greedy-orca keeps its own 0.025).
+    /// Peer clearance of the ORCA filter at full speed, m; at rest the smaller of this and
+    /// 0.035 (docs/adr/0017). greedy-orca keeps its own fixed 0.025.
     #[arg(long, default_value_t = obs::orca::FILTER_CLEARANCE)]
     pub filter_clearance: f32,
     /// Scenario config (TOML); default: the simulator's defaults.

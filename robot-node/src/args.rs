@@ -30,7 +30,8 @@ pub struct Params {
     /// Pass the policy's velocity through ORCA as a safety filter (obs::orca); None: on,
     /// unless `shield` is (safety by default; `orca_filter:=false` for the raw policy).
     pub orca_filter: Option<bool>,
-    /// Peer clearance of that filter, m (`obs::orca::FILTER_CLEARANCE`).
+    /// Peer clearance of that filter at full speed, m (`obs::orca::FILTER_CLEARANCE`);
+    /// at rest it is the smaller of this and `obs::orca::FILTER_REST_CLEARANCE` (ADR 0017).
     pub orca_clearance: f64,
     /// Pick/place reach beyond the robot radius (greedy-orca stops within it); default:
     /// `robot_radius` (the simulator's default reach equals its radius at every scale).
@@ -125,7 +126,7 @@ impl Params {
 
 pub const USAGE: &str = "usage: robot_node [--ros-args -r __ns:=/robot_N [-r __node:=NAME] \
 [-p NAME:=VALUE]... [--params-file FILE.yaml]... [--log-level LEVEL]]
-parameters: policy (path), controller (greedy|greedy-orca|policy), shield (false), orca_filter (true unless shield:=true), orca_clearance (0.04 m),
+parameters: policy (path), controller (greedy|greedy-orca|policy), shield (false), orca_filter (true unless shield:=true), orca_clearance (0.04 m at full speed, 0.035 at rest),
             control_rate_hz (10),
             use_sim_time (false), reach (= robot_radius),
             k_speed (0.5), stale_timeout_s (1.0), static_stale_timeout_s (= stale_timeout_s, <=0 off),

@@ -66,8 +66,9 @@ pub struct TrainConfig {
     /// robot_node `orca_filter:=true` run) before the simulator steps: the policy learns
     /// with the filter as part of its world. PPO still scores the discrete action.
     pub orca_filter: bool,
-    /// Peer clearance of that filter, m (`obs::orca::FILTER_CLEARANCE`; runs before it
-    /// existed used greedy-ORCA's 0.025).
+    /// Peer clearance of that filter at full speed, m (`obs::orca::FILTER_CLEARANCE`; runs
+    /// before it existed used greedy-ORCA's 0.025); at rest the smaller of this and
+    /// `obs::orca::FILTER_REST_CLEARANCE` (ADR 0017; runs before it kept it fixed).
     pub orca_filter_clearance: f32,
     /// Constrained PPO (PPO-Lagrangian, Ray et al. 2019, as reward shaping): hold the
     /// contact rate (bodies touched per robot-step, all kinds) at this budget with a
