@@ -252,7 +252,7 @@ impl GreedyOrca {
         peers: &[f32],
     ) -> [f32; 2] {
         let t = greedy_target(own, machines, storages, peers, &self.params.greedy);
-        self.preferred_or_make_room(t, storages)
+        self.preferred_or_make_room(t, own, machines, storages)
     }
 
     /// A target action's preferred velocity (`crate::targets`): [`Self::preferred_towards`]
@@ -266,15 +266,69 @@ impl GreedyOrca {
         peers: &[f32],
     ) -> [f32; 2] {
         let t = targets::target(action, own, machines, storages, peers, &self.params.greedy);
-        self.preferred_or_make_room(t, storages)
+        self.preferred_or_make_room(t, own, machines, storages)
     }
 
-    /// [`Self::preferred_towards`] `target`; with no target, [`Self::make_room`] first.
-    fn preferred_or_make_room(&self, target: Option<Target>, storages: &[f32]) -> [f32; 2] {
+    /// [`Self::preferred_towards`] `target`; with no target, [`Self::make_room`] first,
+    /// then [`Self::keep_off`].
+    fn preferred_or_make_room(
+        &self,
+        target: Option<Target>,
+        own: &[f32],
+        machines: &[f32],
+        storages: &[f32],
+    ) -> [f32; 2] {
         match target {
-            None => self.make_room(storages).unwrap_or([0.0, 0.0]),
+            None => self
+                .make_room(storages)
+                .or_else(|| self.keep_off(own, machines, storages))
+                .unwrap_or([0.0, 0.0]),
             t => self.preferred_towards(t),
         }
+    }
+
+    /// Velocity straight away from the nearest wall or box while the robot's centre is
+    /// closer to it than ORCA's obstacle margin (robot radius + box clearance), stopping
+    /// at the margin; None when nothing is that close. For a robot with nowhere to go:
+    /// ORCA only forbids moving *into* an obstacle, so a robot at rest inside the margin
+    /// stays where it is, and in a real-time fleet one that a late command had carried
+    /// to touching a wall stayed touching it for the rest of the run (135 contact steps
+    /// in one main-job run of 19; never offline, where a resting robot does not drift).
+    pub fn keep_off(&self, own: &[f32], machines: &[f32], storages: &[f32]) -> Option<[f32; 2]> {
+        let p = &self.params;
+        let g = &p.greedy;
+        let margin = g.robot_radius + self.box_clearance();
+        // (centre-to-surface distance, unit direction away from the surface)
+        let mut nearest: Option<(f32, [f32; 2])> = None;
+        let mut consider = |d: f32, away: [f32; 2]| {
+            if d < margin && nearest.is_none_or(|(b, _)| d < b) {
+                nearest = Some((d, away));
+            }
+        };
+        let (x, y) = (own[0], own[1]);
+        consider(p.room_half - x, [-1.0, 0.0]);
+        consider(p.room_half + x, [1.0, 0.0]);
+        consider(p.room_half - y, [0.0, -1.0]);
+        consider(p.room_half + y, [0.0, 1.0]);
+        let boxes = machines
+            .chunks_exact(3)
+            .map(|m| ([m[0], m[1]], g.machine_half))
+            .chain(
+                storages
+                    .chunks_exact(2)
+                    .map(|s| ([s[0], s[1]], g.storage_half)),
+            );
+        for (c, h) in boxes {
+            let q = nearest_on_box(c, h, [0.0, 0.0]);
+            let n = norm(q);
+            // n ~ 0: the centre is on the box; the contact physics pushes it out first.
+            if n > 1e-6 {
+                consider(n, [-q[0] / n, -q[1] / n]);
+            }
+        }
+        let (d, away) = nearest?;
+        let speed = ((margin - d) / g.dt).min(g.k_speed);
+        Some([away[0] * speed, away[1] * speed])
     }
 
     /// Velocity straight away from the nearest storage box while closer to it than
@@ -621,14 +675,51 @@ mod tests {
             c.greedy_preferred(&[0.0, 0.0, 0.0], &busy, &far, &[]),
             [0.0, 0.0]
         );
-        // off: stay even when touching
+        // off: no berth, only keep_off's (out of the box's contact margin)
         let mut p = params();
         p.make_room = 0.0;
         let off = GreedyOrca::new(p).unwrap();
+        let v = off.greedy_preferred(&[0.0, 0.0, 0.0], &busy, &near, &[]);
+        assert!(v[1] < 0.0 && v[0].abs() < 1e-6, "{v:?}");
+        let margin = p.greedy.robot_radius + p.clearance.min(0.4 * p.reach);
+        let clear = [0.0, half[1] + margin + 0.01];
         assert_eq!(
-            off.greedy_preferred(&[0.0, 0.0, 0.0], &busy, &near, &[]),
+            off.greedy_preferred(&[0.0, 0.0, 0.0], &busy, &clear, &[]),
             [0.0, 0.0]
         );
+    }
+
+    /// A robot with nowhere to go that rests inside ORCA's obstacle margin of a wall or a
+    /// box it is not heading for backs straight out to the margin, no farther; ORCA alone
+    /// would let it rest there (it only forbids moving in).
+    #[test]
+    fn a_robot_with_nowhere_to_go_keeps_off_walls_and_boxes() {
+        let p = params();
+        let c = GreedyOrca::new(p).unwrap();
+        let r = p.greedy.robot_radius;
+        let margin = r + p.clearance.min(0.4 * p.reach);
+        let busy_far = [-0.8, 0.0, 0.0];
+        // 4 mm from the right wall (room half 1.15): straight left, the gap in one step.
+        let x = p.room_half - r - 0.004;
+        let v = c.greedy_preferred(&[x, 0.0, 0.0], &busy_far, &[], &[]);
+        let want = (margin - (r + 0.004)) / p.greedy.dt;
+        assert!((v[0] + want).abs() < 1e-4 && v[1].abs() < 1e-6, "{v:?}");
+        // Beyond the margin it stays.
+        let x = p.room_half - margin - 0.001;
+        assert_eq!(c.greedy_preferred(&[x, 0.0, 0.0], &busy_far, &[], &[]), [0.0, 0.0]);
+        // A busy machine 3 mm below (greedy has no task): up, away from it.
+        let h = p.greedy.machine_half;
+        let below = [0.0, -(h[1] + r + 0.003), 0.0];
+        let v = c.greedy_preferred(&[0.0, 0.0, 0.0], &below, &[], &[]);
+        assert!(v[1] > 0.0 && v[0].abs() < 1e-6, "{v:?}");
+        // The right wall 1 mm away as well: the nearer surface wins.
+        let x = p.room_half - r - 0.001;
+        let v = c.greedy_preferred(&[x, 0.0, 0.0], &below, &[], &[]);
+        assert!(v[0] < 0.0 && v[1].abs() < 1e-6, "{v:?}");
+        // A policy asking to stay keeps off the same way.
+        let x = p.room_half - r - 0.004;
+        let v = c.target_preferred(0, &[x, 0.0, 0.0], &busy_far, &[], &[]);
+        assert!(v[0] < 0.0, "{v:?}");
     }
 
     /// Only a robot with nowhere to go makes room: one with a task heads for it, and a
