@@ -706,7 +706,10 @@ mod tests {
         assert!((v[0] + want).abs() < 1e-4 && v[1].abs() < 1e-6, "{v:?}");
         // Beyond the margin it stays.
         let x = p.room_half - margin - 0.001;
-        assert_eq!(c.greedy_preferred(&[x, 0.0, 0.0], &busy_far, &[], &[]), [0.0, 0.0]);
+        assert_eq!(
+            c.greedy_preferred(&[x, 0.0, 0.0], &busy_far, &[], &[]),
+            [0.0, 0.0]
+        );
         // A busy machine 3 mm below (greedy has no task): up, away from it.
         let h = p.greedy.machine_half;
         let below = [0.0, -(h[1] + r + 0.003), 0.0];
