@@ -269,8 +269,11 @@ impl GreedyOrca {
         self.preferred_or_make_room(t, own, machines, storages)
     }
 
-    /// [`Self::preferred_towards`] `target`; with no target, [`Self::make_room`] first,
-    /// then [`Self::keep_off`].
+    /// [`Self::preferred_towards`] `target`. With no target: out of an obstacle's margin
+    /// first ([`Self::keep_off`]), else [`Self::make_room`]. The order matters in real
+    /// time: backing out from a storage next to a wall, ORCA stops a robot at the wall's
+    /// margin, a late command carries it on into contact, and make-room alone kept it
+    /// pressed there for a whole main-job run.
     fn preferred_or_make_room(
         &self,
         target: Option<Target>,
@@ -280,8 +283,8 @@ impl GreedyOrca {
     ) -> [f32; 2] {
         match target {
             None => self
-                .make_room(storages)
-                .or_else(|| self.keep_off(own, machines, storages))
+                .keep_off(own, machines, storages)
+                .or_else(|| self.make_room(storages))
                 .unwrap_or([0.0, 0.0]),
             t => self.preferred_towards(t),
         }
@@ -291,9 +294,9 @@ impl GreedyOrca {
     /// closer to it than ORCA's obstacle margin (robot radius + box clearance), stopping
     /// at the margin; None when nothing is that close. For a robot with nowhere to go:
     /// ORCA only forbids moving *into* an obstacle, so a robot at rest inside the margin
-    /// stays where it is, and in a real-time fleet one that a late command had carried
-    /// to touching a wall stayed touching it for the rest of the run (135 contact steps
-    /// in one main-job run of 19; never offline, where a resting robot does not drift).
+    /// stays where it is; in a real-time fleet one that a late command had carried to
+    /// touching a wall stayed touching it for the rest of the run (135 contact steps in
+    /// about one main-job run of ten; never offline, where ORCA's stop is exact).
     pub fn keep_off(&self, own: &[f32], machines: &[f32], storages: &[f32]) -> Option<[f32; 2]> {
         let p = &self.params;
         let g = &p.greedy;
@@ -687,6 +690,27 @@ mod tests {
             off.greedy_preferred(&[0.0, 0.0, 0.0], &busy, &clear, &[]),
             [0.0, 0.0]
         );
+    }
+
+    /// Inside a wall's margin, getting out of it comes before making room: next to the top
+    /// wall, backing away from a storage below would press up into the wall; the robot
+    /// moves down out of the margin instead, and makes room once outside it.
+    #[test]
+    fn out_of_a_wall_margin_before_making_room() {
+        let p = params();
+        let c = GreedyOrca::new(p).unwrap();
+        let r = p.greedy.robot_radius;
+        let margin = r + p.clearance.min(0.4 * p.reach);
+        let busy_far = [-0.8, -0.8, 0.0];
+        let storage = [0.0, -0.3];
+        let open = c.greedy_preferred(&[0.0, 0.0, 0.0], &busy_far, &storage, &[]);
+        assert!(open[1] > 0.0, "make room: up, {open:?}");
+        let inside = p.room_half - r - 0.003;
+        let v = c.greedy_preferred(&[0.0, inside, 0.0], &busy_far, &storage, &[]);
+        assert!(v[1] < 0.0, "out of the wall's margin: down, {v:?}");
+        let outside = p.room_half - margin - 0.001;
+        let v = c.greedy_preferred(&[0.0, outside, 0.0], &busy_far, &storage, &[]);
+        assert!(v[1] > 0.0, "outside it, make room again: {v:?}");
     }
 
     /// A robot with nowhere to go that rests inside ORCA's obstacle margin of a wall or a
