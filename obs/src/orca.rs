@@ -193,6 +193,23 @@ impl OrcaParams {
     }
 }
 
+/// Every box a robot observes, machines then storages: (centre relative to the robot,
+/// half size).
+fn observed_boxes<'a>(
+    machines: &'a [f32],
+    storages: &'a [f32],
+    g: &'a GreedyParams,
+) -> impl Iterator<Item = ([f32; 2], [f32; 2])> + 'a {
+    machines
+        .chunks_exact(3)
+        .map(|m| ([m[0], m[1]], g.machine_half))
+        .chain(
+            storages
+                .chunks_exact(2)
+                .map(|s| ([s[0], s[1]], g.storage_half)),
+        )
+}
+
 /// One robot's greedy-ORCA controller (keeps the previous positions it saw).
 #[derive(Debug, Clone)]
 pub struct GreedyOrca {
@@ -313,15 +330,7 @@ impl GreedyOrca {
         consider(p.room_half + x, [1.0, 0.0]);
         consider(p.room_half - y, [0.0, -1.0]);
         consider(p.room_half + y, [0.0, 1.0]);
-        let boxes = machines
-            .chunks_exact(3)
-            .map(|m| ([m[0], m[1]], g.machine_half))
-            .chain(
-                storages
-                    .chunks_exact(2)
-                    .map(|s| ([s[0], s[1]], g.storage_half)),
-            );
-        for (c, h) in boxes {
+        for (c, h) in observed_boxes(machines, storages, g) {
             let q = nearest_on_box(c, h, [0.0, 0.0]);
             let n = norm(q);
             // n ~ 0: the centre is on the box; the contact physics pushes it out first.
@@ -474,15 +483,7 @@ impl GreedyOrca {
         // and the room (clockwise: keeps the robot in).
         let horizon = k * p.obstacle_time_horizon + r + box_clearance;
         let mut obstacles: Vec<Cow<Obstacle>> = Vec::new();
-        let boxes = machines
-            .chunks_exact(3)
-            .map(|m| ([m[0], m[1]], g.machine_half))
-            .chain(
-                storages
-                    .chunks_exact(2)
-                    .map(|s| ([s[0], s[1]], g.storage_half)),
-            );
-        for (c, h) in boxes {
+        for (c, h) in observed_boxes(machines, storages, g) {
             if crate::geom::box_distance(c, h, [0.0, 0.0]) <= horizon {
                 obstacles.push(Cow::Owned(Obstacle::Closed {
                     vertices: vec![
