@@ -1,7 +1,10 @@
-//! Row-major GEMM helpers over `matrixmultiply::sgemm`.
+//! Row-major GEMM helpers over `matrixmultiply::sgemm` (or, with the same bits, the
+//! non-packing kernel in `direct` where the CPU has it).
 //!
 //! All matrices are row-major; a "transposed" operand is expressed by swapping strides, so
 //! no copy is ever made.
+
+mod direct;
 
 /// A strided view of a matrix: element (i, j) is at `i * rs + j * cs`.
 #[derive(Clone, Copy)]
@@ -65,15 +68,17 @@ pub fn gemm(
         small(m, k, n, alpha, a, b, beta, c, rsc);
         return;
     }
-    if m * k * n >= PAR_MIN_MACS {
-        if m >= 2 * ROW_CHUNK {
-            return par_rows(m, k, n, alpha, a, b, beta, c, rsc);
+    direct::with_contiguous_rows(k, n, b, |b| {
+        if m * k * n >= PAR_MIN_MACS {
+            if m >= 2 * ROW_CHUNK {
+                return par_rows(m, k, n, alpha, a, b, beta, c, rsc);
+            }
+            if k >= 2 * K_CHUNK {
+                return par_inner(m, k, n, alpha, a, b, beta, c, rsc);
+            }
         }
-        if k >= 2 * K_CHUNK {
-            return par_inner(m, k, n, alpha, a, b, beta, c, rsc);
-        }
-    }
-    sgemm(m, k, n, alpha, a, b, beta, c, rsc);
+        sgemm(m, k, n, alpha, a, b, beta, c, rsc);
+    })
 }
 
 /// Below this many multiply-adds a GEMM runs on the calling thread (a rayon hand-off
@@ -185,6 +190,9 @@ fn sgemm(
         assert!((k - 1) * b.rs + (n - 1) * b.cs < b.data.len());
     }
     assert!((m - 1) * rsc + (n - 1) < c.len());
+    if direct::try_sgemm(m, k, n, alpha, a, b, beta, c, rsc) {
+        return;
+    }
     // SAFETY: the asserts above keep every access inside the slices; A/B are only read and C
     // is a unique borrow.
     unsafe {
