@@ -1,5 +1,9 @@
-//! matrixmultiply's sgemm rate on the learner's shapes, one thread, CPU time (immune to
-//! other processes' load): `cargo run --release -p policy --example gemm_rate`.
+//! GEMM rate on the learner's per-call shapes (the most multiply-adds of a 6.4_2 update,
+//! bundled config), one thread, CPU time (immune to other processes' load): `nn::gemm::gemm`
+//! (the non-packing kernel where the CPU has AVX-512F) against `matrixmultiply::sgemm`,
+//! alternating in one run. `cargo run --release -p policy --example gemm_rate`.
+
+use policy::nn::gemm::{gemm, View};
 
 fn cpu_secs() -> f64 {
     let s = std::fs::read_to_string("/proc/thread-self/stat").unwrap_or_default();
@@ -15,61 +19,93 @@ fn cpu_secs() -> f64 {
     (u + k) / tick
 }
 
+/// One shape: C (m x n) = alpha A (m x k) B (k x n), A/B row strides and column strides.
+struct Shape {
+    m: usize,
+    k: usize,
+    n: usize,
+    a: (usize, usize),
+    b: (usize, usize),
+    alpha: f32,
+    what: &'static str,
+}
+
 fn main() {
-    // (m, k, n, a_rs, a_cs, b_rs, b_cs, what)
-    let shapes: [(usize, usize, usize, bool, &str); 6] = [
-        (9600, 64, 64, false, "x W^T (Linear 64->64, Q, out_proj)"),
-        (9600, 256, 64, false, "x W^T (fc 256->64)"),
-        (9600, 64, 192, false, "x W^T (GRU input gates)"),
-        (9600, 16, 64, false, "Q_h Wk_h (per head, inner 16)"),
-        (
-            64,
-            9600,
-            64,
-            true,
-            "dY^T X (weight gradient over the batch)",
-        ),
-        (480, 64, 192, false, "h W_hh^T (one GRU step, 480 rows)"),
+    let s = |m, k, n, a, b, alpha, what| Shape {
+        m,
+        k,
+        n,
+        a,
+        b,
+        alpha,
+        what,
+    };
+    // Per-call shapes after `gemm`'s 256-row / 1,024-inner splits, from an instrumented
+    // 6.4_2 update (share of the update's GEMM multiply-adds in brackets).
+    let shapes = [
+        s(256, 64, 64, (64, 1), (1, 64), 1.0, "x W^T, 64 -> 64 (8 %)"),
+        s(64, 1024, 64, (1, 64), (64, 1), 1.0, "dY^T X weight gradient (7 %)"),
+        s(192, 1024, 64, (1, 192), (64, 1), 1.0, "GRU dW (7 %)"),
+        s(256, 256, 64, (256, 1), (1, 256), 1.0, "x W^T, 256 -> 64 (5 %)"),
+        s(256, 64, 256, (64, 1), (256, 1), 1.0, "dY W, 64 -> 256 (5 %)"),
+        s(64, 1024, 256, (1, 64), (256, 1), 1.0, "fc dW (5 %)"),
+        s(240, 64, 192, (64, 1), (1, 64), 1.0, "h W_hh^T (4 %)"),
+        s(256, 64, 16, (256, 1), (1, 64), 1.0, "per head, out 16 (8 %)"),
+        s(256, 16, 64, (64, 1), (64, 1), 0.25, "per head, inner 16 (8 %)"),
+        s(16, 1024, 64, (1, 64), (256, 1), 1.0, "per head dW (7 %)"),
     ];
-    for (m, k, n, trans_a, what) in shapes {
-        let a = vec![0.5f32; m * k];
-        let b = vec![0.25f32; k * n];
+    println!("GFLOP/s in CPU time, one thread: nn::gemm::gemm vs matrixmultiply::sgemm");
+    for sh in shapes {
+        let (m, k, n) = (sh.m, sh.k, sh.n);
+        let alen = (m - 1) * sh.a.0 + (k - 1) * sh.a.1 + 1;
+        let blen = (k - 1) * sh.b.0 + (n - 1) * sh.b.1 + 1;
+        let a: Vec<f32> = (0..alen).map(|i| (i % 7) as f32 * 0.1).collect();
+        let b: Vec<f32> = (0..blen).map(|i| (i % 5) as f32 * 0.2).collect();
         let mut c = vec![0.0f32; m * n];
-        let (ars, acs) = if trans_a {
-            (1, m as isize)
-        } else {
-            (k as isize, 1)
-        };
-        let reps = (2e9 / (m * k * n) as f64).max(3.0) as usize;
-        let t0 = cpu_secs();
-        let w0 = std::time::Instant::now();
-        for _ in 0..reps {
-            unsafe {
-                matrixmultiply::sgemm(
-                    m,
-                    k,
-                    n,
-                    1.0,
-                    a.as_ptr(),
-                    ars,
-                    acs,
-                    b.as_ptr(),
-                    1,
-                    k as isize,
-                    0.0,
-                    c.as_mut_ptr(),
-                    n as isize,
-                    1,
-                );
-            }
-        }
-        let cpu = cpu_secs() - t0;
-        let wall = w0.elapsed().as_secs_f64();
+        let reps = (1e10 / (m * k * n) as f64).max(3.0) as usize;
         let flop = 2.0 * (m * k * n * reps) as f64;
+        let (mut ours, mut theirs) = (Vec::new(), Vec::new());
+        for _round in 0..3 {
+            let t0 = cpu_secs();
+            for _ in 0..reps {
+                let av = View { data: &a, rs: sh.a.0, cs: sh.a.1 };
+                let bv = View { data: &b, rs: sh.b.0, cs: sh.b.1 };
+                gemm(m, k, n, sh.alpha, av, bv, 0.0, &mut c, n);
+            }
+            ours.push(flop / (cpu_secs() - t0).max(1e-9) / 1e9);
+            let t0 = cpu_secs();
+            for _ in 0..reps {
+                // SAFETY: the vectors hold every element the strides reach.
+                unsafe {
+                    matrixmultiply::sgemm(
+                        m,
+                        k,
+                        n,
+                        sh.alpha,
+                        a.as_ptr(),
+                        sh.a.0 as isize,
+                        sh.a.1 as isize,
+                        b.as_ptr(),
+                        sh.b.0 as isize,
+                        sh.b.1 as isize,
+                        0.0,
+                        c.as_mut_ptr(),
+                        n as isize,
+                        1,
+                    );
+                }
+            }
+            theirs.push(flop / (cpu_secs() - t0).max(1e-9) / 1e9);
+        }
+        let med = |v: &mut Vec<f64>| {
+            v.sort_by(f64::total_cmp);
+            v[v.len() / 2]
+        };
+        let (o, t) = (med(&mut ours), med(&mut theirs));
         println!(
-            "{m:>5} x {k:>5} x {n:>4}  {:6.1} GFLOP/s CPU time ({:6.1} wall)  {what}",
-            flop / cpu.max(1e-9) / 1e9,
-            flop / wall / 1e9
+            "{m:>4} x {k:>5} x {n:>4}  {o:6.1} vs {t:6.1}  ({:4.2}x)  {}",
+            o / t,
+            sh.what
         );
     }
 }

@@ -39,6 +39,7 @@ pub struct GruCache {
     hm: Vec<f32>,    // TB x H: masked previous hidden state
     masks: Vec<f32>, // TB
     gh: Vec<f32>,    // B x 3H scratch
+    whh_t: Vec<f32>, // H x 3H: W_hh transposed once per forward, not once per step's GEMM
     dgates: Vec<f32>,
     dgh: Vec<f32>,
     dhm: Vec<f32>,
@@ -244,6 +245,19 @@ impl Gru {
         let gh = sized(&mut c.gh, b * 3 * h);
         let bhh = &p[self.b_hh.r()];
         let whh = &p[self.w_hh.r()];
+        // W_hh^T row-major, copied once for all T steps when the steps are GEMMs; a single
+        // robot's decision (a few rows) reads W_hh in place (dot products, no copy).
+        let whh_view = if b > 4 {
+            let whh_t = sized(&mut c.whh_t, h * 3 * h);
+            for (o, row) in whh.chunks_exact(h).enumerate() {
+                for (i, x) in row.iter().enumerate() {
+                    whh_t[i * 3 * h + o] = *x;
+                }
+            }
+            rm(&c.whh_t[..h * 3 * h], 3 * h)
+        } else {
+            tr(whh, h)
+        };
         for s in 0..t {
             let rows = s * b..(s + 1) * b;
             {
@@ -265,7 +279,7 @@ impl Gru {
                 row.copy_from_slice(bhh);
             }
             let hm_s = &hm[rows.start * h..rows.end * h];
-            gemm(b, h, 3 * h, 1.0, rm(hm_s, h), tr(whh, h), 1.0, gh, 3 * h);
+            gemm(b, h, 3 * h, 1.0, rm(hm_s, h), whh_view, 1.0, gh, 3 * h);
             let rr = rows.start * 3 * h..rows.end * 3 * h;
             let hr = rows.start * h..rows.end * h;
             step_rows(
