@@ -44,14 +44,54 @@ fn main() {
     // 6.4_2 update (share of the update's GEMM multiply-adds in brackets).
     let shapes = [
         s(256, 64, 64, (64, 1), (1, 64), 1.0, "x W^T, 64 -> 64 (8 %)"),
-        s(64, 1024, 64, (1, 64), (64, 1), 1.0, "dY^T X weight gradient (7 %)"),
+        s(
+            64,
+            1024,
+            64,
+            (1, 64),
+            (64, 1),
+            1.0,
+            "dY^T X weight gradient (7 %)",
+        ),
         s(192, 1024, 64, (1, 192), (64, 1), 1.0, "GRU dW (7 %)"),
-        s(256, 256, 64, (256, 1), (1, 256), 1.0, "x W^T, 256 -> 64 (5 %)"),
-        s(256, 64, 256, (64, 1), (256, 1), 1.0, "dY W, 64 -> 256 (5 %)"),
+        s(
+            256,
+            256,
+            64,
+            (256, 1),
+            (1, 256),
+            1.0,
+            "x W^T, 256 -> 64 (5 %)",
+        ),
+        s(
+            256,
+            64,
+            256,
+            (64, 1),
+            (256, 1),
+            1.0,
+            "dY W, 64 -> 256 (5 %)",
+        ),
         s(64, 1024, 256, (1, 64), (256, 1), 1.0, "fc dW (5 %)"),
         s(240, 64, 192, (64, 1), (1, 64), 1.0, "h W_hh^T (4 %)"),
-        s(256, 64, 16, (256, 1), (1, 64), 1.0, "per head, out 16 (8 %)"),
-        s(256, 16, 64, (64, 1), (64, 1), 0.25, "per head, inner 16 (8 %)"),
+        s(
+            256,
+            64,
+            16,
+            (256, 1),
+            (1, 64),
+            1.0,
+            "per head, out 16 (8 %)",
+        ),
+        s(
+            256,
+            16,
+            64,
+            (64, 1),
+            (64, 1),
+            0.25,
+            "per head, inner 16 (8 %)",
+        ),
         s(16, 1024, 64, (1, 64), (256, 1), 1.0, "per head dW (7 %)"),
     ];
     println!("GFLOP/s in CPU time, one thread: nn::gemm::gemm vs matrixmultiply::sgemm");
@@ -68,8 +108,16 @@ fn main() {
         for _round in 0..3 {
             let t0 = cpu_secs();
             for _ in 0..reps {
-                let av = View { data: &a, rs: sh.a.0, cs: sh.a.1 };
-                let bv = View { data: &b, rs: sh.b.0, cs: sh.b.1 };
+                let av = View {
+                    data: &a,
+                    rs: sh.a.0,
+                    cs: sh.a.1,
+                };
+                let bv = View {
+                    data: &b,
+                    rs: sh.b.0,
+                    cs: sh.b.1,
+                };
                 gemm(m, k, n, sh.alpha, av, bv, 0.0, &mut c, n);
             }
             ours.push(flop / (cpu_secs() - t0).max(1e-9) / 1e9);

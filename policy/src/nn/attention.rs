@@ -14,7 +14,7 @@
 //! chunks of rows on rayon's pool, each chunk compiled for the best instruction set found
 //! at run time (see `simd`); the projections around it are GEMMs over the whole batch.
 
-use super::gemm::{gemm, rm, tr, View};
+use super::gemm::{gemm, gemm_rows_of, rm, tr, View};
 use super::init::Init;
 use super::linear::{Linear, LinearConfig};
 use super::params::{ParamStore, Slot};
@@ -63,6 +63,8 @@ pub struct MhaCache {
     d_u: Vec<f32>,
     d_q: Vec<f32>,
     enc_t: Vec<f32>,    // d_in x E: the entity encoder's weight, transposed
+    wv_t: Vec<f32>,     // H x E x dh: each head's Wv, transposed
+    wk_t: Vec<f32>,     // H x E x dh: each head's Wk, transposed
     partials: Vec<f32>, // chunks x (d_in + 1) x E: entity-encoder gradient per row chunk
 }
 
@@ -351,6 +353,25 @@ fn for_row_chunks(
     }
 }
 
+/// The per-head blocks of a [H*dh, E] weight (rows = heads' outputs), each transposed to
+/// E x dh row-major, head after head, into `buf`: the chunk GEMMs then read B's rows in
+/// place instead of copying the transposed head once per chunk.
+fn head_major_t<'a>(w: &[f32], h: usize, dh: usize, e: usize, buf: &'a mut Vec<f32>) -> &'a [f32] {
+    let t = sized(buf, h * e * dh);
+    for hh in 0..h {
+        let (wh, th) = (
+            &w[hh * dh * e..(hh + 1) * dh * e],
+            &mut t[hh * e * dh..(hh + 1) * e * dh],
+        );
+        for (j, row) in wh.chunks_exact(e).enumerate() {
+            for (i, x) in row.iter().enumerate() {
+                th[i * dh + j] = *x;
+            }
+        }
+    }
+    t
+}
+
 impl MultiHeadAttention {
     pub fn new(cfg: MhaConfig, store: &mut ParamStore, name: &str, rng: &mut impl Rng) -> Self {
         assert!(
@@ -436,26 +457,45 @@ impl MultiHeadAttention {
             row.copy_from_slice(&bias[..e]);
         }
         gemm(b, e, e, 1.0, rm(q_in, e), tr(&w[..e * e], e), 1.0, q, e);
-        // U[:, hh, :] = scale * Q_h Wk_h
-        let u = sized(&mut c.u, b * h * e);
-        for hh in 0..h {
-            let wk = &w[(e + hh * dh) * e..(e + (hh + 1) * dh) * e];
-            let qv = View {
-                data: &q[hh * dh..],
-                rs: e,
-                cs: 1,
-            };
-            gemm(b, dh, e, scale, qv, rm(wk, e), 0.0, &mut u[hh * e..], h * e);
-        }
-        // softmax(U . e_j) and ebar = sum_j a_j e_j, row by row
-        let a = sized(&mut c.a, b * h * s);
-        let ebar = sized(&mut c.ebar, b * h * e);
-        let (u, wt) = (&*u, &c.enc_t);
-        for_row_chunks(b, a, h * s, ebar, h * e, false, |ci, ac, ec| {
+        // Per chunk of rows, while the chunk is in cache: U[:, hh, :] = scale * Q_h Wk_h,
+        // then the softmax(U . e_j) and ebar = sum_j a_j e_j of each row, then
+        // O[:, head hh] = ebar_h Wv_h^T + bv_h. U and ebar are B x H x E (four times the
+        // activations), so the whole-batch products streamed them through memory.
+        // `gemm_rows_of` keeps each element's bits as one whole-batch GEMM.
+        let wv_t = head_major_t(&w[2 * e * e..3 * e * e], h, dh, e, &mut c.wv_t);
+        let (u, a, ebar) = (
+            sized(&mut c.u, b * h * e),
+            sized(&mut c.a, b * h * s),
+            sized(&mut c.ebar, b * h * e),
+        );
+        let (q, wt) = (&*q, &c.enc_t);
+        let bv = &bias[2 * e..3 * e];
+        let chunk = |ci: usize, uc: &mut [f32], ac: &mut [f32], ec: &mut [f32], oc: &mut [f32]| {
+            let (r0, rows) = (ci * ROW_CHUNK, oc.len() / e);
+            for hh in 0..h {
+                let wk = &w[(e + hh * dh) * e..(e + (hh + 1) * dh) * e];
+                let qv = View {
+                    data: &q[r0 * e + hh * dh..],
+                    rs: e,
+                    cs: 1,
+                };
+                gemm_rows_of(
+                    b,
+                    rows,
+                    dh,
+                    e,
+                    scale,
+                    qv,
+                    rm(wk, e),
+                    0.0,
+                    &mut uc[hh * e..],
+                    h * e,
+                );
+            }
             SCRATCH.with_borrow_mut(|scr| {
                 let kbuf = sized(scr, s * e);
                 for (i, (ar, er)) in ac.chunks_mut(h * s).zip(ec.chunks_mut(h * e)).enumerate() {
-                    let r = ci * ROW_CHUNK + i;
+                    let r = r0 + i;
                     let kr: &[f32] = match kv {
                         Kv::Rows(x) => &x[r * s * e..(r + 1) * s * e],
                         Kv::Encoded { x, enc } => {
@@ -464,22 +504,31 @@ impl MultiHeadAttention {
                             kbuf
                         }
                     };
-                    fwd_row(&u[r * h * e..(r + 1) * h * e], kr, ar, er, h, e, s);
+                    fwd_row(&uc[i * h * e..(i + 1) * h * e], kr, ar, er, h, e, s);
                 }
-            })
-        });
-        // O[:, head hh] = ebar_h Wv_h^T + bv_h
-        for row in o.chunks_exact_mut(e) {
-            row.copy_from_slice(&bias[2 * e..3 * e]);
-        }
-        for hh in 0..h {
-            let wv = &w[(2 * e + hh * dh) * e..(2 * e + (hh + 1) * dh) * e];
-            let ev = View {
-                data: &ebar[hh * e..],
-                rs: h * e,
-                cs: 1,
-            };
-            gemm(b, e, dh, 1.0, ev, tr(wv, e), 1.0, &mut o[hh * dh..], e);
+            });
+            for row in oc.chunks_exact_mut(e) {
+                row.copy_from_slice(bv);
+            }
+            for hh in 0..h {
+                let ev = View {
+                    data: &ec[hh * e..],
+                    rs: h * e,
+                    cs: 1,
+                };
+                let wvh = rm(&wv_t[hh * e * dh..(hh + 1) * e * dh], dh);
+                gemm_rows_of(b, rows, e, dh, 1.0, ev, wvh, 1.0, &mut oc[hh * dh..], e);
+            }
+        };
+        if b <= ROW_CHUNK {
+            chunk(0, u, a, ebar, o);
+        } else {
+            u.par_chunks_mut(ROW_CHUNK * h * e)
+                .zip(a.par_chunks_mut(ROW_CHUNK * h * s))
+                .zip(ebar.par_chunks_mut(ROW_CHUNK * h * e))
+                .zip(o.par_chunks_mut(ROW_CHUNK * e))
+                .enumerate()
+                .for_each(|(ci, (((uc, ac), ec), oc))| chunk(ci, uc, ac, ec, oc));
         }
         self.out.forward(p, o, b, out);
     }

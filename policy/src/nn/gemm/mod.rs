@@ -81,6 +81,45 @@ pub fn gemm(
     })
 }
 
+/// Rows of a product of `total_m` rows, computed on the calling thread with exactly the
+/// bits [`gemm`] gives those rows when it computes the whole product (the small-product
+/// loop when the whole is small, one `sgemm` call's bits otherwise, which no row split
+/// changes). Lets a layer compute a product chunk by chunk, next to the code that uses each
+/// chunk while it is in cache, without changing results.
+#[allow(clippy::too_many_arguments)]
+pub fn gemm_rows_of(
+    total_m: usize,
+    m: usize,
+    k: usize,
+    n: usize,
+    alpha: f32,
+    a: View,
+    b: View,
+    beta: f32,
+    c: &mut [f32],
+    rsc: usize,
+) {
+    if m == 0 || n == 0 {
+        return;
+    }
+    if total_m <= SMALL_M || k <= SMALL_K {
+        if k > 0 {
+            assert!(
+                (m - 1) * a.rs + (k - 1) * a.cs < a.data.len(),
+                "gemm: A too small"
+            );
+            assert!(
+                (k - 1) * b.rs + (n - 1) * b.cs < b.data.len(),
+                "gemm: B too small"
+            );
+        }
+        assert!((m - 1) * rsc + (n - 1) < c.len(), "gemm: C too small");
+        small(m, k, n, alpha, a, b, beta, c, rsc);
+        return;
+    }
+    direct::with_contiguous_rows(k, n, b, |b| sgemm(m, k, n, alpha, a, b, beta, c, rsc));
+}
+
 /// Below this many multiply-adds a GEMM runs on the calling thread (a rayon hand-off
 /// costs some microseconds).
 const PAR_MIN_MACS: usize = 1 << 20;
