@@ -59,7 +59,6 @@ pub struct MhaCache {
     ebar: Vec<f32>, // B x H x E (sum_j a_j e_j)
     o: Vec<f32>,    // B x E (concatenated heads, before out_proj)
     d_o: Vec<f32>,
-    d_ebar: Vec<f32>,
     d_u: Vec<f32>,
     d_q: Vec<f32>,
     enc_t: Vec<f32>,    // d_in x E: the entity encoder's weight, transposed
@@ -328,10 +327,10 @@ dispatch! {
     }
 }
 
-/// Run `f(chunk_index, a_chunk, b_chunk)` over matching chunks of [`ROW_CHUNK`] rows of `a`
-/// (`la` per row) and `b` (`lb` per chunk row, or `lb` per chunk when `per_chunk`), on
-/// rayon's pool when there is more than one chunk: single-row inference never touches the
-/// thread pool (nor allocates).
+/// Run `f(chunk_index, a_chunk, b_chunk, c_chunk)` over matching chunks of [`ROW_CHUNK`]
+/// rows of `a` (`la` per row), `b` (`lb` per chunk row, or `lb` per chunk when
+/// `per_chunk`) and `c` (`lc` per row), on rayon's pool when there is more than one chunk:
+/// single-row inference never touches the thread pool (nor allocates).
 #[allow(clippy::too_many_arguments)]
 fn for_row_chunks(
     rows: usize,
@@ -340,16 +339,19 @@ fn for_row_chunks(
     b: &mut [f32],
     lb: usize,
     per_chunk: bool,
-    f: impl Fn(usize, &mut [f32], &mut [f32]) + Sync,
+    c: &mut [f32],
+    lc: usize,
+    f: impl Fn(usize, &mut [f32], &mut [f32], &mut [f32]) + Sync,
 ) {
     let cb = if per_chunk { lb } else { ROW_CHUNK * lb };
     if rows <= ROW_CHUNK {
-        f(0, a, b);
+        f(0, a, b, &mut c[..rows * lc]);
     } else {
         a.par_chunks_mut(ROW_CHUNK * la)
             .zip(b.par_chunks_mut(cb))
+            .zip(c[..rows * lc].par_chunks_mut(ROW_CHUNK * lc))
             .enumerate()
-            .for_each(|(i, (x, y))| f(i, x, y));
+            .for_each(|(i, ((x, y), z))| f(i, x, y, z));
     }
 }
 
@@ -557,18 +559,17 @@ impl MultiHeadAttention {
             return;
         }
         let k = self.prepare_kv(p, kv, &mut c.enc_t);
-        self.backward_value(p, g, b, c);
+        self.backward_value(g, b, c);
         self.backward_scores(p, g, kv, k, b, s, c, dkv);
         self.backward_query(p, g, q_in, b, c, dq_in);
     }
 
-    /// Backward of O = ebar_h Wv_h^T + bv_h: grads of Wv and bv, writes `c.d_ebar`.
-    fn backward_value(&self, p: &[f32], g: &mut [f32], b: usize, c: &mut MhaCache) {
+    /// Backward of O = ebar_h Wv_h^T + bv_h: grads of Wv and bv (d_ebar is formed per row
+    /// chunk in [`backward_scores`](Self::backward_scores)).
+    fn backward_value(&self, g: &mut [f32], b: usize, c: &MhaCache) {
         let (e, h, dh) = (self.cfg.dim, self.cfg.heads, self.dh());
-        let w = &p[self.in_w.r()];
         let d_o = &c.d_o[..b * e];
         let ebar = &c.ebar;
-        let d_ebar = sized(&mut c.d_ebar, b * h * e);
         {
             let gw = &mut g[self.in_w.r()];
             for hh in 0..h {
@@ -583,23 +584,7 @@ impl MultiHeadAttention {
                     rs: h * e,
                     cs: 1,
                 };
-                gemm(dh, b, e, 1.0, dov_t, ev, 1.0, &mut gw[wv_r.clone()], e);
-                let dov = View {
-                    data: &d_o[hh * dh..],
-                    rs: e,
-                    cs: 1,
-                };
-                gemm(
-                    b,
-                    dh,
-                    e,
-                    1.0,
-                    dov,
-                    rm(&w[wv_r], e),
-                    0.0,
-                    &mut d_ebar[hh * e..],
-                    h * e,
-                );
+                gemm(dh, b, e, 1.0, dov_t, ev, 1.0, &mut gw[wv_r], e);
             }
         }
         {
@@ -626,31 +611,49 @@ impl MultiHeadAttention {
         c: &mut MhaCache,
         dkv: Option<&mut [f32]>,
     ) {
-        let (e, h) = (self.cfg.dim, self.cfg.heads);
-        let (u, a) = (&c.u, &c.a);
-        // softmax / score path, row by row
+        let (e, h, dh) = (self.cfg.dim, self.cfg.heads, self.dh());
+        let scale = 1.0 / (dh as f32).sqrt();
+        let w = &p[self.in_w.r()];
+        let wk_t = head_major_t(&w[e * e..2 * e * e], h, dh, e, &mut c.wk_t);
+        let (u, a, d_o) = (&c.u, &c.a, &c.d_o);
         let d_u = sized(&mut c.d_u, b * h * e);
+        let d_q = sized(&mut c.d_q, b * e);
         let n_chunks = b.div_ceil(ROW_CHUNK);
-        let d_ebar = &c.d_ebar[..b * h * e];
         let wt = &c.enc_t;
-        // per chunk: its d_u rows and either its dkv rows or its encoder-gradient partial
+        // Per chunk of rows, while it is in cache: d_ebar_h = d_O_h Wv_h (scratch, never
+        // stored for the batch), the softmax / score path row by row into d_u, then
+        // d_Q_h = scale d_U_h Wk_h^T. Each chunk writes its d_u and d_q rows and either its
+        // dkv rows or its encoder-gradient partial.
         let part_len = (k + 1) * e;
-        let run = |ci: usize, du_c: &mut [f32], dk_c: &mut [f32]| {
+        let run = |ci: usize, du_c: &mut [f32], dk_c: &mut [f32], dq_c: &mut [f32]| {
+            let (r0, rows) = (ci * ROW_CHUNK, dq_c.len() / e);
             SCRATCH.with_borrow_mut(|scr| {
-                let need = 2 * s * e + h * s;
+                let need = 2 * s * e + h * s + rows * h * e;
                 if scr.len() < need {
                     scr.resize(need, 0.0);
                 }
                 let (kbuf, rest) = scr.split_at_mut(s * e);
-                let (dkbuf, ds) = rest.split_at_mut(s * e);
+                let (dkbuf, rest) = rest.split_at_mut(s * e);
+                let (ds, rest) = rest.split_at_mut(h * s);
+                let d_ebar = &mut rest[..rows * h * e];
+                for hh in 0..h {
+                    let wv = &w[(2 * e + hh * dh) * e..(2 * e + (hh + 1) * dh) * e];
+                    let dov = View {
+                        data: &d_o[r0 * e + hh * dh..],
+                        rs: e,
+                        cs: 1,
+                    };
+                    let de = &mut d_ebar[hh * e..];
+                    gemm_rows_of(b, rows, dh, e, 1.0, dov, rm(wv, e), 0.0, de, h * e);
+                }
                 if let Kv::Encoded { .. } = kv {
                     dk_c.iter_mut().for_each(|x| *x = 0.0);
                 }
                 for (i, du) in du_c.chunks_mut(h * e).enumerate() {
-                    let r = ci * ROW_CHUNK + i;
+                    let r = r0 + i;
                     let (ar, de, ur) = (
                         &a[r * h * s..(r + 1) * h * s],
-                        &d_ebar[r * h * e..(r + 1) * h * e],
+                        &d_ebar[i * h * e..(i + 1) * h * e],
                         &u[r * h * e..(r + 1) * h * e],
                     );
                     match kv {
@@ -667,17 +670,37 @@ impl MultiHeadAttention {
                         }
                     }
                 }
-            })
+            });
+            for hh in 0..h {
+                let duv = View {
+                    data: &du_c[hh * e..],
+                    rs: h * e,
+                    cs: 1,
+                };
+                let wkh = rm(&wk_t[hh * e * dh..(hh + 1) * e * dh], dh);
+                gemm_rows_of(
+                    b,
+                    rows,
+                    e,
+                    dh,
+                    scale,
+                    duv,
+                    wkh,
+                    0.0,
+                    &mut dq_c[hh * dh..],
+                    e,
+                );
+            }
         };
         match kv {
             Kv::Rows(_) => {
                 let dkv = dkv.expect("Kv::Rows needs dkv");
                 let dkv = &mut dkv[..b * s * e];
-                for_row_chunks(b, d_u, h * e, dkv, s * e, false, run);
+                for_row_chunks(b, d_u, h * e, dkv, s * e, false, d_q, e, run);
             }
             Kv::Encoded { enc, .. } => {
                 let parts = sized(&mut c.partials, n_chunks * part_len);
-                for_row_chunks(b, d_u, h * e, parts, part_len, true, run);
+                for_row_chunks(b, d_u, h * e, parts, part_len, true, d_q, e, run);
                 // chunk partials in chunk order: the same sum for any thread count
                 let (gw, gb) = (enc.w.r(), enc.b.r());
                 for pc in c.partials.chunks_exact(part_len) {
@@ -707,8 +730,8 @@ impl MultiHeadAttention {
         let scale = 1.0 / (dh as f32).sqrt();
         let w = &p[self.in_w.r()];
         // U = scale * Q_h Wk_h
-        let (d_u, q) = (&c.d_u, &c.q);
-        let d_q = sized(&mut c.d_q, b * e);
+        // d_q was formed per row chunk in `backward_scores`
+        let (d_u, q, d_q) = (&c.d_u, &c.q, &c.d_q[..b * e]);
         {
             let gw = &mut g[self.in_w.r()];
             for hh in 0..h {
@@ -718,17 +741,6 @@ impl MultiHeadAttention {
                     rs: h * e,
                     cs: 1,
                 };
-                gemm(
-                    b,
-                    e,
-                    dh,
-                    scale,
-                    duv,
-                    tr(&w[wk_r.clone()], e),
-                    0.0,
-                    &mut d_q[hh * dh..],
-                    e,
-                );
                 let qt = View {
                     data: &q[hh * dh..],
                     rs: 1,
