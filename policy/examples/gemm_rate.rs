@@ -93,6 +93,8 @@ fn main() {
             "per head, inner 16 (8 %)",
         ),
         s(16, 1024, 64, (1, 64), (256, 1), 1.0, "per head dW (7 %)"),
+        s(32, 16, 64, (64, 1), (64, 1), 0.25, "U_h per 32-row chunk"),
+        s(32, 64, 16, (256, 1), (16, 1), 1.0, "O_h per 32-row chunk"),
     ];
     println!("GFLOP/s in CPU time, one thread: nn::gemm::gemm vs matrixmultiply::sgemm");
     for sh in shapes {
