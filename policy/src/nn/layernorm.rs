@@ -89,7 +89,10 @@ impl LayerNorm {
             let rs = 1.0 / (var[j] / d as f32 + self.cfg.eps).sqrt();
             mean[r0 + j] = m[j];
             rstd[r0 + j] = rs;
-            let (xr, yr) = (&x[j * d..(j + 1) * d], &mut y[(r0 + j) * d..(r0 + j + 1) * d]);
+            let (xr, yr) = (
+                &x[j * d..(j + 1) * d],
+                &mut y[(r0 + j) * d..(r0 + j + 1) * d],
+            );
             for i in 0..d {
                 yr[i] = (xr[i] - m[j]) * rs * gm[i] + bt[i];
             }
@@ -192,7 +195,10 @@ mod tests {
         s.data = rand_vec(s.data.len(), 7);
         let mut x = rand_vec(n * d, 8);
         x[..d].iter_mut().for_each(|v| *v = -0.0);
-        x[d..2 * d].iter_mut().enumerate().for_each(|(i, v)| *v = if i % 2 == 0 { 0.0 } else { -0.0 });
+        x[d..2 * d]
+            .iter_mut()
+            .enumerate()
+            .for_each(|(i, v)| *v = if i % 2 == 0 { 0.0 } else { -0.0 });
         let dy = rand_vec(n * d, 9);
         let (gm, bt) = (&s.data[ln.gamma.r()], &s.data[ln.beta.r()]);
         // reference

@@ -341,8 +341,22 @@ mod tests {
     /// `matrixmultiply`.
     #[test]
     fn same_bits_as_matrixmultiply() {
-        if !std::arch::is_x86_feature_detected!("avx512f") {
-            eprintln!("no AVX-512F: the direct kernel is not used on this CPU");
+        if !super::uses_kernel() {
+            // Without AVX-512F (or with TENDING_NO_DIRECT_GEMM) every call must fall back to
+            // matrixmultiply, which is then the only GEMM and trivially has its own bits.
+            let a = rand_vec(64, 1);
+            let mut c = vec![0.0; 64];
+            assert!(!super::try_sgemm(
+                8,
+                8,
+                8,
+                1.0,
+                rm(&a, 8),
+                rm(&a, 8),
+                0.0,
+                &mut c,
+                8
+            ));
             return;
         }
         let mut checked = 0;
