@@ -76,8 +76,8 @@ impl LayerNorm {
             }
         }
         let mut var = [SUM_START; R];
-        for j in 0..R {
-            m[j] /= d as f32;
+        for mj in m.iter_mut() {
+            *mj /= d as f32;
         }
         for i in 0..d {
             for j in 0..R {
