@@ -14,7 +14,7 @@
 //! chunks of rows on rayon's pool, each chunk compiled for the best instruction set found
 //! at run time (see `simd`); the projections around it are GEMMs over the whole batch.
 
-use super::gemm::{gemm, gemm_rows_of, rm, tr, View};
+use super::gemm::{gemm, gemm_rows_of, rm, tr, View, SMALL_M};
 use super::init::Init;
 use super::linear::{Linear, LinearConfig};
 use super::params::{ParamStore, Slot};
@@ -358,7 +358,7 @@ fn for_row_chunks(
 /// The per-head blocks of a [H*dh, E] weight (rows = heads' outputs), each transposed to
 /// E x dh row-major, head after head, into `buf`: the chunk GEMMs then read B's rows in
 /// place instead of copying the transposed head once per chunk.
-fn head_major_t<'a>(w: &[f32], h: usize, dh: usize, e: usize, buf: &'a mut Vec<f32>) -> &'a [f32] {
+fn head_major_t(w: &[f32], h: usize, dh: usize, e: usize, buf: &mut Vec<f32>) {
     let t = sized(buf, h * e * dh);
     for hh in 0..h {
         let (wh, th) = (
@@ -371,7 +371,6 @@ fn head_major_t<'a>(w: &[f32], h: usize, dh: usize, e: usize, buf: &'a mut Vec<f
             }
         }
     }
-    t
 }
 
 impl MultiHeadAttention {
@@ -464,7 +463,13 @@ impl MultiHeadAttention {
         // O[:, head hh] = ebar_h Wv_h^T + bv_h. U and ebar are B x H x E (four times the
         // activations), so the whole-batch products streamed them through memory.
         // `gemm_rows_of` keeps each element's bits as one whole-batch GEMM.
-        let wv_t = head_major_t(&w[2 * e * e..3 * e * e], h, dh, e, &mut c.wv_t);
+        // Wv's heads transposed once for the chunk GEMMs; a few rows (one robot's decision)
+        // take the small-product loop, which reads Wv in place: no copy on that path.
+        let copy_wv = b > SMALL_M;
+        if copy_wv {
+            head_major_t(&w[2 * e * e..3 * e * e], h, dh, e, &mut c.wv_t);
+        }
+        let wv_t = &c.wv_t;
         let (u, a, ebar) = (
             sized(&mut c.u, b * h * e),
             sized(&mut c.a, b * h * s),
@@ -518,7 +523,11 @@ impl MultiHeadAttention {
                     rs: h * e,
                     cs: 1,
                 };
-                let wvh = rm(&wv_t[hh * e * dh..(hh + 1) * e * dh], dh);
+                let wvh = if copy_wv {
+                    rm(&wv_t[hh * e * dh..(hh + 1) * e * dh], dh)
+                } else {
+                    tr(&w[(2 * e + hh * dh) * e..(2 * e + (hh + 1) * dh) * e], e)
+                };
                 gemm_rows_of(b, rows, e, dh, 1.0, ev, wvh, 1.0, &mut oc[hh * dh..], e);
             }
         };
@@ -614,7 +623,12 @@ impl MultiHeadAttention {
         let (e, h, dh) = (self.cfg.dim, self.cfg.heads, self.dh());
         let scale = 1.0 / (dh as f32).sqrt();
         let w = &p[self.in_w.r()];
-        let wk_t = head_major_t(&w[e * e..2 * e * e], h, dh, e, &mut c.wk_t);
+        // as Wv in `forward`: copied for chunk GEMMs, read in place by the small-product loop
+        let copy_wk = b > SMALL_M;
+        if copy_wk {
+            head_major_t(&w[e * e..2 * e * e], h, dh, e, &mut c.wk_t);
+        }
+        let wk_t = &c.wk_t;
         let (u, a, d_o) = (&c.u, &c.a, &c.d_o);
         let d_u = sized(&mut c.d_u, b * h * e);
         let d_q = sized(&mut c.d_q, b * e);
@@ -677,7 +691,11 @@ impl MultiHeadAttention {
                     rs: h * e,
                     cs: 1,
                 };
-                let wkh = rm(&wk_t[hh * e * dh..(hh + 1) * e * dh], dh);
+                let wkh = if copy_wk {
+                    rm(&wk_t[hh * e * dh..(hh + 1) * e * dh], dh)
+                } else {
+                    tr(&w[(e + hh * dh) * e..(e + (hh + 1) * dh) * e], e)
+                };
                 gemm_rows_of(
                     b,
                     rows,

@@ -256,7 +256,7 @@ fn sgemm(
 
 /// Below this many rows, a direct loop beats packing the B operand (single-robot
 /// inference multiplies one row by 64x64 weights).
-const SMALL_M: usize = 4;
+pub const SMALL_M: usize = 4;
 
 /// With an inner dimension this small (the 2-3 feature entity encoders), packing costs more
 /// than it saves, and `matrixmultiply` would allocate its packing buffers on every call,
