@@ -54,7 +54,6 @@ pub enum Kv<'a> {
 #[derive(Debug, Clone, Default)]
 pub struct MhaCache {
     q: Vec<f32>,    // B x E
-    u: Vec<f32>,    // B x H x E (scaled Wk_h^T q_h)
     a: Vec<f32>,    // B x H x S (softmax weights)
     ebar: Vec<f32>, // B x H x E (sum_j a_j e_j)
     o: Vec<f32>,    // B x E (concatenated heads, before out_proj)
@@ -458,11 +457,12 @@ impl MultiHeadAttention {
             row.copy_from_slice(&bias[..e]);
         }
         gemm(b, e, e, 1.0, rm(q_in, e), tr(&w[..e * e], e), 1.0, q, e);
-        // Per chunk of rows, while the chunk is in cache: U[:, hh, :] = scale * Q_h Wk_h,
-        // then the softmax(U . e_j) and ebar = sum_j a_j e_j of each row, then
-        // O[:, head hh] = ebar_h Wv_h^T + bv_h. U and ebar are B x H x E (four times the
-        // activations), so the whole-batch products streamed them through memory.
-        // `gemm_rows_of` keeps each element's bits as one whole-batch GEMM.
+        // Per chunk of rows, while the chunk is in cache: U[:, hh, :] = scale * Q_h Wk_h
+        // (per-thread scratch: backward recomputes it, cheaper than writing and reading
+        // back a B x H x E array), then the softmax(U . e_j) and ebar = sum_j a_j e_j of
+        // each row, then O[:, head hh] = ebar_h Wv_h^T + bv_h. U and ebar are B x H x E
+        // (four times the activations), so whole-batch products streamed them through
+        // memory. `gemm_rows_of` keeps each element's bits as one whole-batch GEMM.
         // Wv's heads transposed once for the chunk GEMMs; a few rows (one robot's decision)
         // take the small-product loop, which reads Wv in place: no copy on that path.
         let copy_wv = b > SMALL_M;
@@ -470,37 +470,38 @@ impl MultiHeadAttention {
             head_major_t(&w[2 * e * e..3 * e * e], h, dh, e, &mut c.wv_t);
         }
         let wv_t = &c.wv_t;
-        let (u, a, ebar) = (
-            sized(&mut c.u, b * h * e),
-            sized(&mut c.a, b * h * s),
-            sized(&mut c.ebar, b * h * e),
-        );
+        let (a, ebar) = (sized(&mut c.a, b * h * s), sized(&mut c.ebar, b * h * e));
         let (q, wt) = (&*q, &c.enc_t);
         let bv = &bias[2 * e..3 * e];
-        let chunk = |ci: usize, uc: &mut [f32], ac: &mut [f32], ec: &mut [f32], oc: &mut [f32]| {
+        let chunk = |ci: usize, ac: &mut [f32], ec: &mut [f32], oc: &mut [f32]| {
             let (r0, rows) = (ci * ROW_CHUNK, oc.len() / e);
-            for hh in 0..h {
-                let wk = &w[(e + hh * dh) * e..(e + (hh + 1) * dh) * e];
-                let qv = View {
-                    data: &q[r0 * e + hh * dh..],
-                    rs: e,
-                    cs: 1,
-                };
-                gemm_rows_of(
-                    b,
-                    rows,
-                    dh,
-                    e,
-                    scale,
-                    qv,
-                    rm(wk, e),
-                    0.0,
-                    &mut uc[hh * e..],
-                    h * e,
-                );
-            }
             SCRATCH.with_borrow_mut(|scr| {
-                let kbuf = sized(scr, s * e);
+                let need = s * e + rows * h * e;
+                if scr.len() < need {
+                    scr.resize(need, 0.0);
+                }
+                let (kbuf, uc) = scr.split_at_mut(s * e);
+                let uc = &mut uc[..rows * h * e];
+                for hh in 0..h {
+                    let wk = &w[(e + hh * dh) * e..(e + (hh + 1) * dh) * e];
+                    let qv = View {
+                        data: &q[r0 * e + hh * dh..],
+                        rs: e,
+                        cs: 1,
+                    };
+                    gemm_rows_of(
+                        b,
+                        rows,
+                        dh,
+                        e,
+                        scale,
+                        qv,
+                        rm(wk, e),
+                        0.0,
+                        &mut uc[hh * e..],
+                        h * e,
+                    );
+                }
                 for (i, (ar, er)) in ac.chunks_mut(h * s).zip(ec.chunks_mut(h * e)).enumerate() {
                     let r = r0 + i;
                     let kr: &[f32] = match kv {
@@ -532,14 +533,13 @@ impl MultiHeadAttention {
             }
         };
         if b <= ROW_CHUNK {
-            chunk(0, u, a, ebar, o);
+            chunk(0, a, ebar, o);
         } else {
-            u.par_chunks_mut(ROW_CHUNK * h * e)
-                .zip(a.par_chunks_mut(ROW_CHUNK * h * s))
+            a.par_chunks_mut(ROW_CHUNK * h * s)
                 .zip(ebar.par_chunks_mut(ROW_CHUNK * h * e))
                 .zip(o.par_chunks_mut(ROW_CHUNK * e))
                 .enumerate()
-                .for_each(|(ci, (((uc, ac), ec), oc))| chunk(ci, uc, ac, ec, oc));
+                .for_each(|(ci, ((ac, ec), oc))| chunk(ci, ac, ec, oc));
         }
         self.out.forward(p, o, b, out);
     }
@@ -629,27 +629,50 @@ impl MultiHeadAttention {
             head_major_t(&w[e * e..2 * e * e], h, dh, e, &mut c.wk_t);
         }
         let wk_t = &c.wk_t;
-        let (u, a, d_o) = (&c.u, &c.a, &c.d_o);
+        let (q, a, d_o) = (&c.q, &c.a, &c.d_o);
         let d_u = sized(&mut c.d_u, b * h * e);
         let d_q = sized(&mut c.d_q, b * e);
         let n_chunks = b.div_ceil(ROW_CHUNK);
         let wt = &c.enc_t;
-        // Per chunk of rows, while it is in cache: d_ebar_h = d_O_h Wv_h (scratch, never
-        // stored for the batch), the softmax / score path row by row into d_u, then
+        // Per chunk of rows, while it is in cache: U recomputed as in `forward` (same bits)
+        // and d_ebar_h = d_O_h Wv_h (both scratch, never stored for the batch), the
+        // softmax / score path row by row into d_u, then
         // d_Q_h = scale d_U_h Wk_h^T. Each chunk writes its d_u and d_q rows and either its
         // dkv rows or its encoder-gradient partial.
         let part_len = (k + 1) * e;
         let run = |ci: usize, du_c: &mut [f32], dk_c: &mut [f32], dq_c: &mut [f32]| {
             let (r0, rows) = (ci * ROW_CHUNK, dq_c.len() / e);
             SCRATCH.with_borrow_mut(|scr| {
-                let need = 2 * s * e + h * s + rows * h * e;
+                let need = 2 * s * e + h * s + 2 * rows * h * e;
                 if scr.len() < need {
                     scr.resize(need, 0.0);
                 }
                 let (kbuf, rest) = scr.split_at_mut(s * e);
                 let (dkbuf, rest) = rest.split_at_mut(s * e);
                 let (ds, rest) = rest.split_at_mut(h * s);
-                let d_ebar = &mut rest[..rows * h * e];
+                let (d_ebar, rest) = rest.split_at_mut(rows * h * e);
+                let u = &mut rest[..rows * h * e];
+                for hh in 0..h {
+                    let wk = &w[(e + hh * dh) * e..(e + (hh + 1) * dh) * e];
+                    let qv = View {
+                        data: &q[r0 * e + hh * dh..],
+                        rs: e,
+                        cs: 1,
+                    };
+                    gemm_rows_of(
+                        b,
+                        rows,
+                        dh,
+                        e,
+                        scale,
+                        qv,
+                        rm(wk, e),
+                        0.0,
+                        &mut u[hh * e..],
+                        h * e,
+                    );
+                }
+                let u = &*u;
                 for hh in 0..h {
                     let wv = &w[(2 * e + hh * dh) * e..(2 * e + (hh + 1) * dh) * e];
                     let dov = View {
@@ -668,7 +691,7 @@ impl MultiHeadAttention {
                     let (ar, de, ur) = (
                         &a[r * h * s..(r + 1) * h * s],
                         &d_ebar[i * h * e..(i + 1) * h * e],
-                        &u[r * h * e..(r + 1) * h * e],
+                        &u[i * h * e..(i + 1) * h * e],
                     );
                     match kv {
                         Kv::Rows(x) => {
