@@ -450,7 +450,6 @@ impl MultiHeadAttention {
             return;
         }
         let k = self.prepare_kv(p, kv, &mut c.enc_t);
-        let scale = 1.0 / (dh as f32).sqrt();
         // Q = q_in Wq^T + bq
         let q = sized(&mut c.q, b * e);
         for row in q.chunks_exact_mut(e) {
@@ -482,26 +481,7 @@ impl MultiHeadAttention {
                 }
                 let (kbuf, uc) = scr.split_at_mut(s * e);
                 let uc = &mut uc[..rows * h * e];
-                for hh in 0..h {
-                    let wk = &w[(e + hh * dh) * e..(e + (hh + 1) * dh) * e];
-                    let qv = View {
-                        data: &q[r0 * e + hh * dh..],
-                        rs: e,
-                        cs: 1,
-                    };
-                    gemm_rows_of(
-                        b,
-                        rows,
-                        dh,
-                        e,
-                        scale,
-                        qv,
-                        rm(wk, e),
-                        0.0,
-                        &mut uc[hh * e..],
-                        h * e,
-                    );
-                }
+                self.u_rows(w, q, b, r0, rows, uc);
                 for (i, (ar, er)) in ac.chunks_mut(h * s).zip(ec.chunks_mut(h * e)).enumerate() {
                     let r = r0 + i;
                     let kr: &[f32] = match kv {
@@ -542,6 +522,24 @@ impl MultiHeadAttention {
                 .for_each(|(ci, ((ac, ec), oc))| chunk(ci, ac, ec, oc));
         }
         self.out.forward(p, o, b, out);
+    }
+
+    /// U of rows r0..r0+rows of a b-row batch into `u` (rows x H x E): U[:, hh, :] =
+    /// scale * Q_h Wk_h, with the bits of the whole-batch product (`gemm_rows_of`). Forward
+    /// computes it per chunk and backward recomputes it, instead of storing it.
+    fn u_rows(&self, w: &[f32], q: &[f32], b: usize, r0: usize, rows: usize, u: &mut [f32]) {
+        let (e, h, dh) = (self.cfg.dim, self.cfg.heads, self.dh());
+        let scale = 1.0 / (dh as f32).sqrt();
+        for hh in 0..h {
+            let wk = &w[(e + hh * dh) * e..(e + (hh + 1) * dh) * e];
+            let qv = View {
+                data: &q[r0 * e + hh * dh..],
+                rs: e,
+                cs: 1,
+            };
+            let uh = &mut u[hh * e..];
+            gemm_rows_of(b, rows, dh, e, scale, qv, rm(wk, e), 0.0, uh, h * e);
+        }
     }
 
     /// Backward of [`forward`](Self::forward) (same inputs, cache from it).
@@ -652,26 +650,7 @@ impl MultiHeadAttention {
                 let (ds, rest) = rest.split_at_mut(h * s);
                 let (d_ebar, rest) = rest.split_at_mut(rows * h * e);
                 let u = &mut rest[..rows * h * e];
-                for hh in 0..h {
-                    let wk = &w[(e + hh * dh) * e..(e + (hh + 1) * dh) * e];
-                    let qv = View {
-                        data: &q[r0 * e + hh * dh..],
-                        rs: e,
-                        cs: 1,
-                    };
-                    gemm_rows_of(
-                        b,
-                        rows,
-                        dh,
-                        e,
-                        scale,
-                        qv,
-                        rm(wk, e),
-                        0.0,
-                        &mut u[hh * e..],
-                        h * e,
-                    );
-                }
+                self.u_rows(w, q, b, r0, rows, u);
                 let u = &*u;
                 for hh in 0..h {
                     let wv = &w[(2 * e + hh * dh) * e..(2 * e + (hh + 1) * dh) * e];

@@ -52,18 +52,7 @@ pub fn gemm(
     if m == 0 || n == 0 {
         return;
     }
-    // Bounds: the last element touched must be inside each slice.
-    if k > 0 {
-        assert!(
-            (m - 1) * a.rs + (k - 1) * a.cs < a.data.len(),
-            "gemm: A too small"
-        );
-        assert!(
-            (k - 1) * b.rs + (n - 1) * b.cs < b.data.len(),
-            "gemm: B too small"
-        );
-    }
-    assert!((m - 1) * rsc + (n - 1) < c.len(), "gemm: C too small");
+    check_bounds(m, k, n, a, b, c.len(), rsc);
     if m <= SMALL_M || k <= SMALL_K {
         small(m, k, n, alpha, a, b, beta, c, rsc);
         return;
@@ -79,6 +68,22 @@ pub fn gemm(
         }
         sgemm(m, k, n, alpha, a, b, beta, c, rsc);
     })
+}
+
+/// Bounds of an m x k x n product (m, n > 0): the last element touched must be inside
+/// each slice.
+fn check_bounds(m: usize, k: usize, n: usize, a: View, b: View, c_len: usize, rsc: usize) {
+    if k > 0 {
+        assert!(
+            (m - 1) * a.rs + (k - 1) * a.cs < a.data.len(),
+            "gemm: A too small"
+        );
+        assert!(
+            (k - 1) * b.rs + (n - 1) * b.cs < b.data.len(),
+            "gemm: B too small"
+        );
+    }
+    assert!((m - 1) * rsc + (n - 1) < c_len, "gemm: C too small");
 }
 
 /// Rows of a product of `total_m` rows, computed on the calling thread with exactly the
@@ -103,17 +108,7 @@ pub fn gemm_rows_of(
         return;
     }
     if total_m <= SMALL_M || k <= SMALL_K {
-        if k > 0 {
-            assert!(
-                (m - 1) * a.rs + (k - 1) * a.cs < a.data.len(),
-                "gemm: A too small"
-            );
-            assert!(
-                (k - 1) * b.rs + (n - 1) * b.cs < b.data.len(),
-                "gemm: B too small"
-            );
-        }
-        assert!((m - 1) * rsc + (n - 1) < c.len(), "gemm: C too small");
+        check_bounds(m, k, n, a, b, c.len(), rsc);
         small(m, k, n, alpha, a, b, beta, c, rsc);
         return;
     }
