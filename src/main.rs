@@ -3,6 +3,7 @@
 
 mod bag_cmd;
 mod bench_sim;
+mod bound_cmd;
 mod chart;
 mod controller;
 mod eval_cmd;
@@ -43,6 +44,8 @@ enum Cmd {
     Train(train_cmd::TrainArgs),
     /// Evaluate a checkpoint or a scripted baseline over setups and seeds (paper tables).
     Eval(eval_cmd::EvalArgs),
+    /// The most parts any controller could deliver on eval's layouts (sim::parts_bound).
+    Bound(bound_cmd::BoundArgs),
     /// rosbag2 MCAP bags: info, metrics, recover, render, play.
     Bag(bag_cmd::BagArgs),
     /// Record every contract topic of a running fleet into a bag until Ctrl-C / SIGTERM.
@@ -63,6 +66,7 @@ fn main() -> std::process::ExitCode {
         Cmd::BenchSim(a) => bench_sim::run(a),
         Cmd::Train(a) => train_cmd::run(a),
         Cmd::Eval(a) => eval_cmd::run(a),
+        Cmd::Bound(a) => bound_cmd::run(a),
         Cmd::Bag(a) => bag_cmd::run(a),
         Cmd::Record(a) => bag_cmd::record(a),
         Cmd::Plot(a) => plot_cmd::run(a),

@@ -4,10 +4,13 @@ every learned method, parts vs the best scripted baseline (greedy, greedy-orca),
 steps vs the scripted baseline with the fewest, robot-robot contacts per robot-step.
 
 The "ceiling" column is the most any policy could deliver relative to the best script:
-P_max / best script parts, where P_max = machines x ceil(episode_steps / prep_steps) is the
-number of parts the machines make if none ever waits for a pickup (sim::Metrics::p_max;
-the default scenario's 200 steps and 20 prep steps, which `tending eval` runs unless given
---config). Where it is below 1.1, the 1.1x target cannot be met by any policy.
+bound / best script parts. The bound is `tending bound`'s (sim::parts_bound: machines
+served the moment they are ready, parts carried to a storage before the episode ends,
+robot-steps enough for the trips), read from DIR/bound.csv, written by
+`tending bound --setups ... --out DIR/bound.csv` on the same setups, seeds and episodes.
+Without that file it is P_max = machines x ceil(episode_steps / prep_steps), the parts the
+machines make if none ever waits for a pickup (the default scenario's 200 steps and 20
+prep steps). Where it is below 1.1, the 1.1x target cannot be met by any policy.
 
 Usage: targets.py DIR  (DIR/<method>/results.csv, one row per setup and seed).
 Prints Markdown. Standard library only."""
@@ -41,6 +44,12 @@ def main(root):
     def m(method, setup, col):
         return mean(float(r[col]) for r in rows[method][setup])
 
+    bound = defaultdict(list)  # setup -> per-seed mean bound
+    bound_file = Path(root) / "bound.csv"
+    if bound_file.exists():
+        with open(bound_file) as fh:
+            for r in csv.DictReader(fh):
+                bound[r["setup"]].append(float(r["parts_bound"]))
     learned = [x for x in rows if x not in SCRIPTS]
     setups = sorted({s for x in rows.values() for s in x}, key=setup_key)
     print("| setup | method | parts | x best script | ceiling | contacts | fewest script | "
@@ -53,7 +62,8 @@ def main(root):
             continue
         best = max(m(x, s, "parts_delivered") for x in SCRIPTS)
         fewest = min(m(x, s, "collisions") for x in SCRIPTS)
-        ceiling = setup_key(s)[1] * PARTS_PER_MACHINE / best
+        most = mean(bound[s]) if s in bound else setup_key(s)[1] * PARTS_PER_MACHINE
+        ceiling = most / best
         for x in SCRIPTS:
             print(f"| {s} | {x} | {m(x, s, 'parts_delivered'):.1f} | "
                   f"{m(x, s, 'parts_delivered') / best:.2f} | {ceiling:.2f} | "
@@ -74,9 +84,10 @@ def main(root):
                   f"{fewest:.1f} | {rr:.4f} | {marks} |")
     print()
     print("targets met = parts >= 1.1x best script / contacts <= fewest script / "
-          "robot-robot <= 0.01 per robot-step (y or n each). ceiling = P_max / best "
-          "script's parts: no policy can exceed it (below 1.10: the parts target is "
-          "out of reach on that setup).")
+          "robot-robot <= 0.01 per robot-step (y or n each). ceiling = the parts bound "
+          f"({'tending bound' if bound_file.exists() else 'P_max'}) / best script's parts: "
+          "no policy can exceed it (below 1.10: the parts target is out of reach on that "
+          "setup).")
     print()
     for x in learned:
         print(f"- {x}: all three targets met on {met[x]} of {counted[x]} setups")

@@ -10,12 +10,14 @@
 //! - [`Env`]: one environment: step, pick/place, rewards, metrics, live add/remove.
 //! - [`VecEnv`]: many environments on rayon, deterministic whatever the thread count.
 //! - [`baselines`]: scripted random and greedy policies.
+//! - [`parts_bound`]: the most parts any controller can deliver from an episode's layout.
 
 // Struct-of-arrays bodies are indexed in lockstep; iterator zips of 5+ arrays read worse.
 #![allow(clippy::needless_range_loop)]
 
 mod action;
 pub mod baselines;
+mod bound;
 mod config;
 mod entities;
 mod env;
@@ -27,6 +29,7 @@ mod setup;
 mod vec_env;
 
 pub use action::{action_to_velocity, N_ACTIONS};
+pub use bound::{parts_bound, PartsBound};
 pub use config::{
     PhysicsConfig, RewardConfig, ScenarioConfig, SizeConfig, TaskConfig, WorldConfig,
 };

@@ -1,0 +1,87 @@
+//! `tending bound`: the most parts any controller could deliver on the layouts that
+//! `tending eval` runs (same setups, seeds and episodes), from `sim::parts_bound`. Issue
+//! 10's targets compare with it: where 1.1x the best script is above the bound, no policy
+//! can meet that target.
+
+use anyhow::{bail, Context, Result};
+use clap::Args;
+use policy::train::eval::eval_env_seed;
+use sim::{parts_bound, Env, Setup};
+use std::fmt::Write as _;
+use std::path::PathBuf;
+
+#[derive(Args, Debug)]
+pub struct BoundArgs {
+    /// Comma-separated setups N.M_K.
+    #[arg(long, default_value = "6.4_2")]
+    pub setups: String,
+    /// Episodes per seed (as `tending eval --episodes`).
+    #[arg(long, default_value_t = 50)]
+    pub episodes: u64,
+    /// Comma-separated evaluation seeds (as `tending eval --seeds`).
+    #[arg(long, default_value = "0,1,2")]
+    pub seeds: String,
+    /// Scenario config (TOML); default: the simulator's defaults.
+    #[arg(long)]
+    pub scenario: Option<PathBuf>,
+    /// Write the per-seed means as CSV here.
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+}
+
+pub fn run(a: BoundArgs) -> Result<()> {
+    let cfg = crate::sim_cmd::load_config(&a.scenario)?;
+    let setups: Vec<Setup> = a
+        .setups
+        .split(',')
+        .map(|s| s.trim().parse::<Setup>())
+        .collect::<Result<_, _>>()?;
+    let seeds: Vec<u64> = a
+        .seeds
+        .split(',')
+        .map(|s| s.trim().parse::<u64>().context("--seeds"))
+        .collect::<Result<_>>()?;
+    if a.episodes == 0 || seeds.is_empty() {
+        bail!("need at least one episode and one seed");
+    }
+    let per_machine = cfg.world.episode_steps.div_ceil(cfg.task.prep_steps.max(1));
+    let mut csv = String::from("setup,seed,episodes,parts_bound,machine_bound,robot_bound,p_max\n");
+    println!("setup      bound (mean over seeds; machines / robots)   P_max");
+    for &setup in &setups {
+        let p_max = (setup.machines as u32 * per_machine) as f64;
+        let mut all = [0.0f64; 3];
+        for &seed in &seeds {
+            let mut sum = [0u64; 3];
+            for ep in 0..a.episodes {
+                let env = Env::new(cfg.clone(), setup, eval_env_seed(seed, ep))
+                    .with_context(|| format!("{setup} seed {seed} episode {ep}"))?;
+                let b = parts_bound(&env).expect("a fresh episode");
+                sum[0] += b.value() as u64;
+                sum[1] += b.machines as u64;
+                sum[2] += b.robots as u64;
+            }
+            let mean = sum.map(|s| s as f64 / a.episodes as f64);
+            writeln!(
+                csv,
+                "{setup},{seed},{},{},{},{},{p_max}",
+                a.episodes, mean[0], mean[1], mean[2]
+            )?;
+            for k in 0..3 {
+                all[k] += mean[k] / seeds.len() as f64;
+            }
+        }
+        println!(
+            "{:<10} {:<7.1} ({:.1} / {:.1}){:>27.0}",
+            setup.to_string(),
+            all[0],
+            all[1],
+            all[2],
+            p_max
+        );
+    }
+    if let Some(out) = &a.out {
+        std::fs::write(out, csv).with_context(|| format!("write {}", out.display()))?;
+        eprintln!("wrote {}", out.display());
+    }
+    Ok(())
+}
