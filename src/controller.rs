@@ -16,15 +16,17 @@ pub struct CheckpointFlags {
     pub orca_filter: bool,
     /// Without the ORCA filter even when the checkpoint was trained behind it.
     pub no_orca_filter: bool,
-    /// Peer clearance of the ORCA filter, m.
+    /// Peer clearance of the ORCA filter at full speed, m.
     pub clearance: f32,
+    /// Peer clearance of the ORCA filter at rest, m (at most `clearance`).
+    pub rest_clearance: f32,
 }
 
 /// The scripted baseline `name` names: greedy | greedy-orca | random.
 pub fn scripted(name: &str) -> Result<Controller> {
     Ok(match name {
         "greedy" => Controller::Greedy,
-        "greedy-orca" => Controller::GreedyOrca,
+        "greedy-orca" => Controller::greedy_orca(),
         "random" => Controller::Random,
         o => bail!("unknown --policy `{o}`: expected greedy, greedy-orca or random"),
     })
@@ -40,8 +42,19 @@ pub fn checkpoint(path: &Path, f: &CheckpointFlags) -> Result<(Controller, Strin
     let orca_filter =
         f.orca_filter || (pol.trained_with_orca_filter() && !f.shield && !f.no_orca_filter);
     let targets = pol.actor().arch.actions == policy::ActionSpace::Targets;
+    // Clearances other than the deployed ones are part of the method's name (sweeps).
+    let rest = f.rest_clearance.min(f.clearance);
+    let margin = if orca_filter
+        && (f.clearance != obs::orca::FILTER_CLEARANCE
+            || rest != obs::orca::FILTER_REST_CLEARANCE.min(f.clearance))
+    {
+        let mm = |m: f32| (m * 1000.0).round() as i32;
+        format!(" {}/{} mm", mm(rest), mm(f.clearance))
+    } else {
+        String::new()
+    };
     let label = format!(
-        "{}{}{} ({})",
+        "{}{}{}{margin} ({})",
         pol.kind(),
         if targets { " targets" } else { "" },
         if f.shield {
@@ -64,6 +77,7 @@ pub fn checkpoint(path: &Path, f: &CheckpointFlags) -> Result<(Controller, Strin
             actor,
             sample,
             clearance: f.clearance,
+            rest_clearance: f.rest_clearance,
         }
     } else {
         Controller::Learned { actor, sample }

@@ -48,6 +48,13 @@ pub struct EvalArgs {
     /// 0.035 (docs/adr/0017). greedy-orca keeps its own fixed 0.025.
     #[arg(long, default_value_t = obs::orca::FILTER_CLEARANCE)]
     pub filter_clearance: f32,
+    /// Peer clearance of the ORCA filter at rest, m (at most --filter-clearance). With
+    /// --filter-clearance, a point of the safety margin's sweep (docs/RESULTS.md 7.7).
+    #[arg(long, default_value_t = obs::orca::FILTER_REST_CLEARANCE)]
+    pub filter_rest_clearance: f32,
+    /// greedy-ORCA's own peer clearance, m (with --policy greedy-orca).
+    #[arg(long, default_value_t = obs::orca::GREEDY_ORCA_CLEARANCE)]
+    pub script_clearance: f32,
     /// Scenario config (TOML); default: the simulator's defaults.
     #[arg(long)]
     pub scenario: Option<PathBuf>,
@@ -56,7 +63,26 @@ pub struct EvalArgs {
     pub out: Option<PathBuf>,
 }
 
+/// A clearance in whole millimetres, for labels.
+fn mm(m: f32) -> i32 {
+    (m * 1000.0).round() as i32
+}
+
 pub fn run(a: EvalArgs) -> Result<()> {
+    for (name, v) in [
+        ("--filter-clearance", a.filter_clearance),
+        ("--filter-rest-clearance", a.filter_rest_clearance),
+        ("--script-clearance", a.script_clearance),
+    ] {
+        if !(v.is_finite() && v > 0.0) {
+            bail!("{name} {v}: must be a positive number of metres");
+        }
+    }
+    if a.script_clearance != obs::orca::GREEDY_ORCA_CLEARANCE
+        && a.policy.as_deref() != Some("greedy-orca")
+    {
+        bail!("--script-clearance is greedy-ORCA's: pass it with --policy greedy-orca");
+    }
     let (ctrl, label) = match (&a.checkpoint, a.policy.as_deref()) {
         (Some(p), None) => {
             let flags = CheckpointFlags {
@@ -65,9 +91,16 @@ pub fn run(a: EvalArgs) -> Result<()> {
                 orca_filter: a.orca_filter,
                 no_orca_filter: a.no_orca_filter,
                 clearance: a.filter_clearance,
+                rest_clearance: a.filter_rest_clearance,
             };
             crate::controller::checkpoint(p, &flags)?
         }
+        (None, Some("greedy-orca")) if a.script_clearance != obs::orca::GREEDY_ORCA_CLEARANCE => (
+            policy::train::Controller::GreedyOrca {
+                clearance: a.script_clearance,
+            },
+            format!("greedy-orca {} mm", mm(a.script_clearance)),
+        ),
         (None, Some(name)) => (crate::controller::scripted(name)?, name.to_string()),
         (None, None) => bail!("pass --checkpoint <file> or --policy greedy|greedy-orca|random"),
         (Some(_), Some(_)) => bail!("--checkpoint and --policy are exclusive"),
@@ -140,4 +173,84 @@ pub fn run(a: EvalArgs) -> Result<()> {
         eprintln!("wrote {}/results.md and results.csv", out.display());
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use clap::Parser;
+
+    #[derive(Parser)]
+    struct Cli {
+        #[command(flatten)]
+        a: EvalArgs,
+    }
+
+    fn args(extra: &[&str]) -> EvalArgs {
+        let base = [
+            "eval",
+            "--setups",
+            "2.2_2",
+            "--episodes",
+            "1",
+            "--seeds",
+            "0",
+        ];
+        Cli::try_parse_from(base.iter().chain(extra)).unwrap().a
+    }
+
+    /// A swept clearance is part of the method's name in the results, and a clearance a
+    /// controller does not use, or that is not a distance, is refused by name.
+    #[test]
+    fn clearances_are_named_in_results_and_checked() {
+        let dir = std::env::temp_dir().join(format!("tending-eval-{}", std::process::id()));
+        let out = dir.to_str().unwrap();
+        run(args(&[
+            "--policy",
+            "greedy-orca",
+            "--script-clearance",
+            "0.03",
+            "--out",
+            out,
+        ]))
+        .unwrap();
+        let csv = std::fs::read_to_string(dir.join("results.csv")).unwrap();
+        assert!(csv
+            .lines()
+            .nth(1)
+            .unwrap()
+            .starts_with("greedy-orca 30 mm,2.2_2,0,1,"));
+        let bundled = concat!(
+            env!("CARGO_MANIFEST_DIR"),
+            "/policy/pretrained/smappo_6.4_2.safetensors"
+        );
+        let e = run(args(&[
+            "--checkpoint",
+            bundled,
+            "--script-clearance",
+            "0.03",
+        ]));
+        assert!(e.unwrap_err().to_string().contains("--script-clearance"));
+        let e = run(args(&[
+            "--checkpoint",
+            bundled,
+            "--filter-rest-clearance=-0.01",
+        ]));
+        assert!(e
+            .unwrap_err()
+            .to_string()
+            .contains("--filter-rest-clearance"));
+        run(args(&[
+            "--checkpoint",
+            bundled,
+            "--filter-rest-clearance",
+            "0.025",
+            "--out",
+            out,
+        ]))
+        .unwrap();
+        let csv = std::fs::read_to_string(dir.join("results.csv")).unwrap();
+        assert!(csv.contains("smappo targets+orca 25/40 mm (smappo_6.4_2.safetensors)"));
+        std::fs::remove_dir_all(&dir).ok();
+    }
 }

@@ -20,6 +20,12 @@ pub struct ParetoArgs {
     pub out: PathBuf,
     #[arg(long, default_value = "parts vs contacts")]
     pub title: String,
+    /// Fit the parts axis to the points instead of starting it at 0, and join the points
+    /// of one method at different safety margins (names ending in "N mm" or "N/M mm",
+    /// `tending eval --script-clearance`, `--filter-clearance`) with a line: a sweep's
+    /// front (bench/safety/margin_sweep.sh).
+    #[arg(long)]
+    pub sweep: bool,
 }
 
 /// (method, setup) -> (mean parts, mean contacts per robot-step) over the file's rows.
@@ -86,7 +92,16 @@ pub fn run(a: &ParetoArgs) -> Result<()> {
     let (methods, pts) = read(&a.files)?;
     let mut setups: Vec<&String> = pts.keys().collect();
     setups.sort_by_key(|s| setup_key(s));
-    draw(&a.out, &a.title, &methods, &setups, &pts)
+    draw(&a.out, &a.title, &methods, &setups, &pts, a.sweep)
+}
+
+/// A method's name without its safety margin ("greedy-orca 30 mm" -> "greedy-orca"):
+/// the points of one sweep share it.
+fn family(method: &str) -> &str {
+    match method.rsplit_once(' ') {
+        Some((rest, "mm")) => rest.rsplit_once(' ').map_or(rest, |(f, _)| f),
+        _ => method,
+    }
 }
 
 fn draw(
@@ -95,6 +110,7 @@ fn draw(
     methods: &[String],
     setups: &[&String],
     pts: &Points,
+    sweep: bool,
 ) -> Result<()> {
     chart::init();
     let e = |x: DrawingAreaErrorKind<_>| anyhow::anyhow!("plot {}: {x:?}", path.display());
@@ -112,7 +128,7 @@ fn draw(
     legend(&legend_area, methods, pw * cols as u32).map_err(e)?;
     let panels = grid.split_evenly((rows, cols));
     for (setup, area) in setups.iter().zip(panels.iter()) {
-        panel(area, setup, methods, &pts[*setup]).map_err(e)?;
+        panel(area, setup, methods, &pts[*setup], sweep).map_err(e)?;
     }
     root.present().map_err(e)?;
     Ok(())
@@ -147,16 +163,50 @@ fn panel<DB: DrawingBackend>(
     setup: &str,
     methods: &[String],
     by: &BTreeMap<String, (f64, f64)>,
+    sweep: bool,
 ) -> Result<(), DrawingAreaErrorKind<DB::ErrorType>> {
     let xmax = by.values().map(|p| p.1).fold(0.0, f64::max).max(1e-3) * 1.15;
     let ymax = by.values().map(|p| p.0).fold(0.0, f64::max).max(1.0) * 1.15;
+    let ymin = if sweep {
+        let lo = by.values().map(|p| p.0).fold(f64::INFINITY, f64::min);
+        let hi = ymax / 1.15;
+        (lo - 0.15 * (hi - lo).max(1.0)).max(0.0)
+    } else {
+        0.0
+    };
+    let ymax = if sweep {
+        let hi = ymax / 1.15;
+        hi + 0.15 * (hi - ymin).max(1.0)
+    } else {
+        ymax
+    };
     let mut c = ChartBuilder::on(area)
         .caption(setup, (chart::FONT, chart::CAPTION))
         .margin(10)
         .x_label_area_size(40)
         .y_label_area_size(56)
-        .build_cartesian_2d(0.0..xmax, 0.0..ymax)?;
+        .build_cartesian_2d(0.0..xmax, ymin..ymax)?;
     chart::mesh(&mut c, "contacts per robot-step", "parts delivered")?;
+    if sweep {
+        // One line per family through its points in order of contacts, in the colour of
+        // its first method.
+        let mut done: Vec<&str> = vec![];
+        for (i, m) in methods.iter().enumerate() {
+            let f = family(m);
+            if done.contains(&f) {
+                continue;
+            }
+            done.push(f);
+            let mut line: Vec<(f64, f64)> = methods
+                .iter()
+                .filter(|x| family(x) == f)
+                .filter_map(|x| by.get(x).map(|&(p, c)| (c, p)))
+                .collect();
+            line.sort_by(|a, b| a.0.total_cmp(&b.0));
+            let col = COLOURS[i % COLOURS.len()];
+            c.draw_series(LineSeries::new(line, col.stroke_width(2)))?;
+        }
+    }
     for (i, m) in methods.iter().enumerate() {
         let Some(&(parts, contacts)) = by.get(m) else {
             continue;
@@ -209,9 +259,25 @@ mod tests {
             files: vec![a, b],
             out: out.clone(),
             title: "t".into(),
+            sweep: false,
         })
         .unwrap();
         assert!(std::fs::metadata(&out).unwrap().len() > 1000);
+        // A sweep joins the points of one method at several margins.
+        run(&ParetoArgs {
+            files: vec![dir.join("a.csv"), dir.join("b.csv")],
+            out: out.clone(),
+            title: "t".into(),
+            sweep: true,
+        })
+        .unwrap();
+        assert_eq!(family("greedy-orca 30 mm"), "greedy-orca");
+        assert_eq!(
+            family("smappo targets+orca 25/40 mm"),
+            "smappo targets+orca"
+        );
+        assert_eq!(family("greedy-orca"), "greedy-orca");
+        assert_eq!(family("smappo+orca"), "smappo+orca");
         // A results.csv of before the contact rates is refused with its name.
         let old = Path::new(env!("CARGO_MANIFEST_DIR")).join("docs/results/greedy_6.4_2.csv");
         let err = format!("{:#}", read(&[old]).unwrap_err());

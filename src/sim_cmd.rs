@@ -66,6 +66,7 @@ fn controller(a: &SimArgs) -> Result<(Controller, String)> {
         orca_filter: a.orca_filter,
         no_orca_filter: false,
         clearance: obs::orca::FILTER_CLEARANCE,
+        rest_clearance: obs::orca::FILTER_REST_CLEARANCE,
     };
     crate::controller::checkpoint(path, &flags)
 }
@@ -154,7 +155,7 @@ mod tests {
         for (flags, ctrl) in [
             (vec!["--policy", "random"], Controller::Random),
             (vec!["--policy", "greedy"], Controller::Greedy),
-            (vec!["--policy", "greedy-orca"], Controller::GreedyOrca),
+            (vec!["--policy", "greedy-orca"], Controller::greedy_orca()),
             (
                 vec!["--checkpoint", &moves],
                 Controller::Learned {
@@ -165,11 +166,7 @@ mod tests {
             // trained behind the ORCA filter: run behind it, as eval and robot_node do
             (
                 vec!["--checkpoint", &bundled],
-                Controller::Filtered {
-                    actor: actor(&bundled),
-                    sample: false,
-                    clearance: obs::orca::FILTER_CLEARANCE,
-                },
+                Controller::filtered(actor(&bundled), false),
             ),
         ] {
             let mut v = vec!["--setup", "4.2_2", "--seed", "7", "--episodes", "3"];

@@ -133,13 +133,21 @@ impl OrcaParams {
     /// rest, which also set the planner's stand-off at a box; without the filter
     /// greedy-ORCA's fixed clearance.
     pub fn for_policy(self, filter_clearance: Option<f32>) -> Self {
-        let with_clearance = match filter_clearance {
-            Some(c) => self
-                .with_clearance(c)
-                .with_rest_clearance(c.min(FILTER_REST_CLEARANCE)),
-            None => self.with_clearance(GREEDY_ORCA_CLEARANCE),
-        };
-        with_clearance.with_make_room_radii(POLICY_MAKE_ROOM_RADII)
+        match filter_clearance {
+            Some(c) => self.for_policy_filter(c, FILTER_REST_CLEARANCE),
+            None => self
+                .with_clearance(GREEDY_ORCA_CLEARANCE)
+                .with_make_room_radii(POLICY_MAKE_ROOM_RADII),
+        }
+    }
+
+    /// [`Self::for_policy`] behind the filter with both clearances given: `clearance` at
+    /// full speed, `rest` (or `clearance` if smaller) at rest. For sweeps of the safety
+    /// margin (`tending eval --filter-clearance --filter-rest-clearance`).
+    pub fn for_policy_filter(self, clearance: f32, rest: f32) -> Self {
+        self.with_clearance(clearance)
+            .with_rest_clearance(clearance.min(rest))
+            .with_make_room_radii(POLICY_MAKE_ROOM_RADII)
     }
 
     /// Refuse values ORCA cannot work with, naming the field.
@@ -639,6 +647,19 @@ mod tests {
         assert_eq!(unfiltered.clearance_at(k), GREEDY_ORCA_CLEARANCE);
         let r = unfiltered.greedy.robot_radius;
         assert!((unfiltered.make_room - POLICY_MAKE_ROOM_RADII * r).abs() < 1e-6);
+        // Both clearances given (sweeps): the deployed pair is `for_policy`'s; a rest
+        // clearance above the full-speed one is cut to it.
+        assert_eq!(
+            params().for_policy_filter(FILTER_CLEARANCE, FILTER_REST_CLEARANCE),
+            params().for_policy(Some(FILTER_CLEARANCE))
+        );
+        let swept = params().for_policy_filter(0.04, 0.025);
+        assert_eq!(
+            (swept.clearance_at(0.0), swept.clearance_at(k)),
+            (0.025, 0.04)
+        );
+        let cut = params().for_policy_filter(0.03, 0.035);
+        assert_eq!((cut.clearance_at(0.0), cut.clearance_at(k)), (0.03, 0.03));
     }
 
     /// Two robots at rest 35 mm apart (surface to surface): inside a fixed 40 mm clearance

@@ -18,14 +18,10 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let episodes: u64 = args.get(2).map_or(Ok(20), |s| s.parse())?;
     let seed: u64 = args.get(3).map_or(Ok(7), |s| s.parse())?;
     let ctrl = if ck == "greedy-orca" {
-        Controller::GreedyOrca
+        Controller::greedy_orca()
     } else {
         let pol = Policy::load(ck)?;
-        Controller::Filtered {
-            actor: Box::new(pol.actor().clone()),
-            sample: false,
-            clearance: obs::orca::FILTER_CLEARANCE,
-        }
+        Controller::filtered(Box::new(pol.actor().clone()), false)
     };
     let cfg = ScenarioConfig::default();
     let touch = cfg.task.collision_distance;

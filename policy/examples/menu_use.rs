@@ -20,17 +20,13 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     // "greedy-orca" instead of a checkpoint: the script, for its share of robots carrying
     // (every robot-step counts as the "greedy" entry).
     let ctrl = if ck == "greedy-orca" {
-        Controller::GreedyOrca
+        Controller::greedy_orca()
     } else {
         let pol = Policy::load(ck)?;
         if pol.actor().arch.n_actions != N_TARGET_ACTIONS {
             return Err(format!("{ck}: not a target-action policy").into());
         }
-        Controller::Filtered {
-            actor: Box::new(pol.actor().clone()),
-            sample: false,
-            clearance: obs::orca::FILTER_CLEARANCE,
-        }
+        Controller::filtered(Box::new(pol.actor().clone()), false)
     };
     let cfg = ScenarioConfig::default();
     // counts[has_part][action]
@@ -47,7 +43,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             0,
             ep,
             |env| {
-                if matches!(ctrl, Controller::GreedyOrca) {
+                if matches!(ctrl, Controller::GreedyOrca { .. }) {
                     env.observe(&mut o);
                     for r in 0..o.rows {
                         script[usize::from(o.own_row(r)[2] > 0.5)] += 1;

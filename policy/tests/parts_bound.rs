@@ -15,11 +15,7 @@ fn bundled() -> Controller {
     );
     let pol = Policy::load(path).expect("bundled policy");
     assert!(pol.trained_with_orca_filter());
-    Controller::Filtered {
-        actor: Box::new(pol.actor().clone()),
-        sample: false,
-        clearance: obs::orca::FILTER_CLEARANCE,
-    }
+    Controller::filtered(Box::new(pol.actor().clone()), false)
 }
 
 #[test]
@@ -27,7 +23,7 @@ fn no_controller_delivers_more_than_the_bound() {
     let cfg = ScenarioConfig::default();
     let controllers = [
         ("greedy", Controller::Greedy),
-        ("greedy-orca", Controller::GreedyOrca),
+        ("greedy-orca", Controller::greedy_orca()),
         ("bundled policy", bundled()),
     ];
     let mut tighter = 0;

@@ -74,6 +74,22 @@ impl GreedyOrcaFleet {
         Self::with_params(env, p)
     }
 
+    /// [`Self::new_filter`] with the filter's full-speed and rest clearances given
+    /// ([`obs::orca::OrcaParams::for_policy_filter`]).
+    pub fn new_filter_with(env: &Env, clearance: f32, rest: f32) -> Result<Self, SimError> {
+        let p = orca_params(env.sizes(), env.config()).for_policy_filter(clearance, rest);
+        Self::with_params(env, p)
+    }
+
+    /// Greedy-ORCA with its peer clearance set (`obs::orca::GREEDY_ORCA_CLEARANCE` is
+    /// [`Self::new`]'s).
+    pub fn with_clearance(env: &Env, clearance: f32) -> Result<Self, SimError> {
+        Self::with_params(
+            env,
+            orca_params(env.sizes(), env.config()).with_clearance(clearance),
+        )
+    }
+
     /// Controllers with explicit parameters (e.g. `orca_params` with `make_room` changed,
     /// for ablations); refused when [`obs::orca::OrcaParams::validate`] refuses them.
     pub fn with_params(env: &Env, p: obs::orca::OrcaParams) -> Result<Self, SimError> {

@@ -29,13 +29,39 @@ pub enum Controller {
     Filtered {
         actor: Box<Actor>,
         sample: bool,
-        /// ORCA peer clearance, m (`obs::orca::FILTER_CLEARANCE` by default).
+        /// ORCA peer clearance at full speed, m (`obs::orca::FILTER_CLEARANCE` by default).
         clearance: f32,
+        /// ORCA peer clearance at rest, m, at most `clearance`
+        /// (`obs::orca::FILTER_REST_CLEARANCE` by default).
+        rest_clearance: f32,
     },
     Greedy,
     /// Greedy task allocation + ORCA avoidance (`obs::orca`), continuous velocities.
-    GreedyOrca,
+    GreedyOrca {
+        /// Peer clearance, m (`obs::orca::GREEDY_ORCA_CLEARANCE` by default).
+        clearance: f32,
+    },
     Random,
+}
+
+impl Controller {
+    /// Greedy-ORCA at its own clearance (`obs::orca::GREEDY_ORCA_CLEARANCE`).
+    pub fn greedy_orca() -> Self {
+        Controller::GreedyOrca {
+            clearance: obs::orca::GREEDY_ORCA_CLEARANCE,
+        }
+    }
+
+    /// `actor` behind the ORCA filter at the clearances it was trained and is deployed
+    /// with (`obs::orca::FILTER_CLEARANCE`, `obs::orca::FILTER_REST_CLEARANCE`).
+    pub fn filtered(actor: Box<Actor>, sample: bool) -> Self {
+        Controller::Filtered {
+            actor,
+            sample,
+            clearance: obs::orca::FILTER_CLEARANCE,
+            rest_clearance: obs::orca::FILTER_REST_CLEARANCE,
+        }
+    }
 }
 
 /// Environment seed of evaluation episode `episode` under `seed`.
@@ -101,10 +127,18 @@ pub fn run_episode_hooked(
         ));
     }
     let mut orca = match ctrl {
-        Controller::GreedyOrca => Some(GreedyOrcaFleet::new(&env)?),
-        Controller::Filtered { clearance, .. } => {
-            Some(GreedyOrcaFleet::new_filter(&env, Some(*clearance))?)
+        Controller::GreedyOrca { clearance } => {
+            Some(GreedyOrcaFleet::with_clearance(&env, *clearance)?)
         }
+        Controller::Filtered {
+            clearance,
+            rest_clearance,
+            ..
+        } => Some(GreedyOrcaFleet::new_filter_with(
+            &env,
+            *clearance,
+            *rest_clearance,
+        )?),
         // Without the filter a target policy still plans with the policy's parameters.
         Controller::Learned { .. } if targets => Some(GreedyOrcaFleet::new_filter(&env, None)?),
         _ => None,
@@ -137,7 +171,7 @@ pub fn run_episode_hooked(
                     );
                 }
             }
-            Controller::GreedyOrca => {
+            Controller::GreedyOrca { .. } => {
                 env.observe(&mut obs);
                 let orca = orca.as_mut().expect("greedy-orca controller has its fleet");
                 orca.act(&obs, &mut vels)?;

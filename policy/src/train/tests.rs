@@ -732,6 +732,7 @@ fn target_actions_contain_greedy_orca() {
         actor: Box::new(always_greedy.clone()),
         sample: false,
         clearance: obs::orca::GREEDY_ORCA_CLEARANCE,
+        rest_clearance: obs::orca::FILTER_REST_CLEARANCE,
     };
     // greedy-ORCA as `tending eval` runs it, but planning with the policy's parameters.
     let script = |ep: u64| {
