@@ -45,7 +45,8 @@ pub struct EvalArgs {
     #[arg(long, requires = "checkpoint", conflicts_with = "orca_filter")]
     pub no_orca_filter: bool,
     /// Peer clearance of the ORCA filter at full speed, m; at rest the smaller of this and
-    /// 0.035 (docs/adr/0017). greedy-orca keeps its own fixed 0.025.
+    /// --filter-rest-clearance (docs/adr/0019). greedy-orca keeps its own fixed 0.025
+    /// (--script-clearance).
     #[arg(long, default_value_t = obs::orca::FILTER_CLEARANCE)]
     pub filter_clearance: f32,
     /// Peer clearance of the ORCA filter at rest, m (at most --filter-clearance). With

@@ -31,7 +31,7 @@ pub struct Params {
     /// unless `shield` is (safety by default; `orca_filter:=false` for the raw policy).
     pub orca_filter: Option<bool>,
     /// Peer clearance of that filter at full speed, m (`obs::orca::FILTER_CLEARANCE`);
-    /// at rest it is the smaller of this and `obs::orca::FILTER_REST_CLEARANCE` (ADR 0017).
+    /// at rest it is the smaller of this and `obs::orca::FILTER_REST_CLEARANCE` (ADR 0017, 0019).
     pub orca_clearance: f64,
     /// Pick/place reach beyond the robot radius (greedy-orca stops within it); default:
     /// `robot_radius` (the simulator's default reach equals its radius at every scale).

@@ -68,7 +68,7 @@ pub struct TrainConfig {
     pub orca_filter: bool,
     /// Peer clearance of that filter at full speed, m (`obs::orca::FILTER_CLEARANCE`; runs
     /// before it existed used greedy-ORCA's 0.025); at rest the smaller of this and
-    /// `obs::orca::FILTER_REST_CLEARANCE` (ADR 0017; runs before it kept it fixed).
+    /// `obs::orca::FILTER_REST_CLEARANCE` (ADR 0017, 0019: 35 mm until 0019; runs before 0017 kept it fixed).
     pub orca_filter_clearance: f32,
     /// Constrained PPO (PPO-Lagrangian, Ray et al. 2019, as reward shaping): hold the
     /// contact rate (bodies touched per robot-step, all kinds) at this budget with a
