@@ -3,10 +3,10 @@
 //! 10's targets compare with it: where 1.1x the best script is above the bound, no policy
 //! can meet that target.
 
-use anyhow::{bail, Context, Result};
+use anyhow::{Context, Result};
 use clap::Args;
 use policy::train::eval::eval_env_seed;
-use sim::{parts_bound, Env, Setup};
+use sim::{parts_bound, Env};
 use std::fmt::Write as _;
 use std::path::PathBuf;
 
@@ -31,19 +31,7 @@ pub struct BoundArgs {
 
 pub fn run(a: BoundArgs) -> Result<()> {
     let cfg = crate::sim_cmd::load_config(&a.scenario)?;
-    let setups: Vec<Setup> = a
-        .setups
-        .split(',')
-        .map(|s| s.trim().parse::<Setup>())
-        .collect::<Result<_, _>>()?;
-    let seeds: Vec<u64> = a
-        .seeds
-        .split(',')
-        .map(|s| s.trim().parse::<u64>().context("--seeds"))
-        .collect::<Result<_>>()?;
-    if a.episodes == 0 || seeds.is_empty() {
-        bail!("need at least one episode and one seed");
-    }
+    let (setups, seeds) = crate::eval_cmd::setups_and_seeds(&a.setups, &a.seeds, a.episodes)?;
     let per_machine = cfg.world.episode_steps.div_ceil(cfg.task.prep_steps.max(1));
     let mut csv = String::from("setup,seed,episodes,parts_bound,machine_bound,robot_bound,p_max\n");
     println!("setup      bound (mean over seeds; machines / robots)   P_max");

@@ -22,6 +22,11 @@ pub struct CheckpointFlags {
     pub rest_clearance: f32,
 }
 
+/// A clearance in whole millimetres, for method names.
+pub fn mm(m: f32) -> i32 {
+    (m * 1000.0).round() as i32
+}
+
 /// The scripted baseline `name` names: greedy | greedy-orca | random.
 pub fn scripted(name: &str) -> Result<Controller> {
     Ok(match name {
@@ -48,7 +53,6 @@ pub fn checkpoint(path: &Path, f: &CheckpointFlags) -> Result<(Controller, Strin
         && (f.clearance != obs::orca::FILTER_CLEARANCE
             || rest != obs::orca::FILTER_REST_CLEARANCE.min(f.clearance))
     {
-        let mm = |m: f32| (m * 1000.0).round() as i32;
         format!(" {}/{} mm", mm(rest), mm(f.clearance))
     } else {
         String::new()

@@ -64,9 +64,24 @@ pub struct EvalArgs {
     pub out: Option<PathBuf>,
 }
 
-/// A clearance in whole millimetres, for labels.
-fn mm(m: f32) -> i32 {
-    (m * 1000.0).round() as i32
+/// `--setups`, `--seeds` and `--episodes` as `tending eval` and `tending bound` take them.
+pub fn setups_and_seeds(
+    setups: &str,
+    seeds: &str,
+    episodes: u64,
+) -> Result<(Vec<Setup>, Vec<u64>)> {
+    let setups: Vec<Setup> = setups
+        .split(',')
+        .map(|s| s.trim().parse::<Setup>())
+        .collect::<Result<_, _>>()?;
+    let seeds: Vec<u64> = seeds
+        .split(',')
+        .map(|s| s.trim().parse::<u64>().context("--seeds"))
+        .collect::<Result<_>>()?;
+    if episodes == 0 || seeds.is_empty() {
+        bail!("need at least one episode and one seed");
+    }
+    Ok((setups, seeds))
 }
 
 pub fn run(a: EvalArgs) -> Result<()> {
@@ -100,7 +115,10 @@ pub fn run(a: EvalArgs) -> Result<()> {
             policy::train::Controller::GreedyOrca {
                 clearance: a.script_clearance,
             },
-            format!("greedy-orca {} mm", mm(a.script_clearance)),
+            format!(
+                "greedy-orca {} mm",
+                crate::controller::mm(a.script_clearance)
+            ),
         ),
         (None, Some(name)) => (crate::controller::scripted(name)?, name.to_string()),
         (None, None) => bail!("pass --checkpoint <file> or --policy greedy|greedy-orca|random"),
@@ -116,19 +134,7 @@ pub fn run(a: EvalArgs) -> Result<()> {
         _ => "scripted",
     };
     let cfg = crate::sim_cmd::load_config(&a.scenario)?;
-    let setups: Vec<Setup> = a
-        .setups
-        .split(',')
-        .map(|s| s.trim().parse::<Setup>())
-        .collect::<Result<_, _>>()?;
-    let seeds: Vec<u64> = a
-        .seeds
-        .split(',')
-        .map(|s| s.trim().parse::<u64>().context("--seeds"))
-        .collect::<Result<_>>()?;
-    if a.episodes == 0 || seeds.is_empty() {
-        bail!("need at least one episode and one seed");
-    }
+    let (setups, seeds) = setups_and_seeds(&a.setups, &a.seeds, a.episodes)?;
 
     let mut rows = vec![];
     let mut csv_rows = vec![];
