@@ -31,8 +31,11 @@ pub struct Params {
     /// unless `shield` is (safety by default; `orca_filter:=false` for the raw policy).
     pub orca_filter: Option<bool>,
     /// Peer clearance of that filter at full speed, m (`obs::orca::FILTER_CLEARANCE`);
-    /// at rest it is the smaller of this and `obs::orca::FILTER_REST_CLEARANCE` (ADR 0017, 0019).
+    /// at rest it is the smaller of this and `orca_rest_clearance` (ADR 0017, 0019).
     pub orca_clearance: f64,
+    /// Peer clearance of that filter at rest, m (`obs::orca::FILTER_REST_CLEARANCE`, what
+    /// the policy is evaluated with; 0.035 is ADR 0017's more conservative margin).
+    pub orca_rest_clearance: f64,
     /// Pick/place reach beyond the robot radius (greedy-orca stops within it); default:
     /// `robot_radius` (the simulator's default reach equals its radius at every scale).
     pub reach: Option<f64>,
@@ -95,6 +98,7 @@ impl Default for Params {
             shield: false,
             orca_filter: None,
             orca_clearance: obs::orca::FILTER_CLEARANCE as f64,
+            orca_rest_clearance: obs::orca::FILTER_REST_CLEARANCE as f64,
             reach: None,
             control_rate_hz: 10.0,
             use_sim_time: false,
@@ -126,7 +130,7 @@ impl Params {
 
 pub const USAGE: &str = "usage: robot_node [--ros-args -r __ns:=/robot_N [-r __node:=NAME] \
 [-p NAME:=VALUE]... [--params-file FILE.yaml]... [--log-level LEVEL]]
-parameters: policy (path), controller (greedy|greedy-orca|policy), shield (false), orca_filter (true unless shield:=true), orca_clearance (0.04 m at full speed, 0.035 at rest),
+parameters: policy (path), controller (greedy|greedy-orca|policy), shield (false), orca_filter (true unless shield:=true), orca_clearance (0.04 m at full speed), orca_rest_clearance (0.03 m at rest),
             control_rate_hz (10),
             use_sim_time (false), reach (= robot_radius),
             k_speed (0.5), stale_timeout_s (1.0), static_stale_timeout_s (= stale_timeout_s, <=0 off),
@@ -186,6 +190,7 @@ fn apply_param(p: &mut Params, name: &str, v: &ParamValue) -> Result<bool, ArgEr
         "orca_filter" => p.orca_filter = Some(boolean(name, v)?),
         "reach" => p.reach = Some(positive(name, v)?),
         "orca_clearance" => p.orca_clearance = positive(name, v)?,
+        "orca_rest_clearance" => p.orca_rest_clearance = positive(name, v)?,
         "control_rate_hz" => p.control_rate_hz = rate_hz(name, v)?,
         "use_sim_time" => p.use_sim_time = boolean(name, v)?,
         "k_speed" => p.k_speed = positive(name, v)?,
@@ -383,9 +388,12 @@ mod tests {
             "controller:=greedy-orca",
             "-p",
             "reach:=0.05",
+            "-p",
+            "orca_rest_clearance:=0.035",
         ]);
         assert_eq!(p.controller, ControllerKind::GreedyOrca);
         assert_eq!(p.reach, Some(0.05));
+        assert_eq!(p.orca_rest_clearance, 0.035);
         assert!(!p.shield);
         let p = parse_ok(&[
             "--ros-args",
@@ -396,7 +404,12 @@ mod tests {
         ]);
         assert_eq!(p.controller, ControllerKind::Policy);
         assert!(p.shield);
-        for bad in ["shield:=3", "reach:=-1", "controller:=orca"] {
+        for bad in [
+            "shield:=3",
+            "reach:=-1",
+            "controller:=orca",
+            "orca_rest_clearance:=0",
+        ] {
             let e = parse(["--ros-args", "-p", bad].iter().copied(), None).unwrap_err();
             let name = bad.split(":=").next().unwrap();
             assert!(e.to_string().contains(name), "{bad}: {e}");

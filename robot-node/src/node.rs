@@ -46,9 +46,13 @@ pub fn make_controller(p: &Params) -> anyhow::Result<(Box<dyn Controller>, f64)>
             })?;
             let (mut c, from_meta) = PolicyController::load(path, p.k_speed as f32)?;
             let filter_on = p.orca_filter.unwrap_or(!p.shield);
-            // `tending eval`'s parameters (OrcaParams::for_policy).
-            let filter = filter_on.then_some(p.orca_clearance as f32);
-            let op = crate::controller::orca_params(p).for_policy(filter);
+            // `tending eval`'s parameters (OrcaParams::for_policy_filter / for_policy).
+            let base = crate::controller::orca_params(p);
+            let op = if filter_on {
+                base.for_policy_filter(p.orca_clearance as f32, p.orca_rest_clearance as f32)
+            } else {
+                base.for_policy(None)
+            };
             if c.has_target_actions() {
                 anyhow::ensure!(
                     !p.shield,
