@@ -701,7 +701,10 @@ mod tests {
         assert_eq!(c.box_clearance_among(&near), wide);
         // greedy-ORCA's own margin does not change.
         let script = GreedyOrca::new(params()).unwrap();
-        assert_eq!(script.box_clearance_among(&near), script.box_clearance_among(&[]));
+        assert_eq!(
+            script.box_clearance_among(&near),
+            script.box_clearance_among(&[])
+        );
     }
 
     /// Two robots at rest 35 mm apart (surface to surface): inside a fixed 40 mm clearance
