@@ -12,15 +12,8 @@ use std::path::PathBuf;
 
 #[derive(Args, Debug)]
 pub struct BoundArgs {
-    /// Comma-separated setups N.M_K.
-    #[arg(long, default_value = "6.4_2")]
-    pub setups: String,
-    /// Episodes per seed (as `tending eval --episodes`).
-    #[arg(long, default_value_t = 50)]
-    pub episodes: u64,
-    /// Comma-separated evaluation seeds (as `tending eval --seeds`).
-    #[arg(long, default_value = "0,1,2")]
-    pub seeds: String,
+    #[command(flatten)]
+    pub runs: crate::eval_cmd::Runs,
     /// Scenario config (TOML); default: the simulator's defaults.
     #[arg(long)]
     pub scenario: Option<PathBuf>,
@@ -31,7 +24,8 @@ pub struct BoundArgs {
 
 pub fn run(a: BoundArgs) -> Result<()> {
     let cfg = crate::sim_cmd::load_config(&a.scenario)?;
-    let (setups, seeds) = crate::eval_cmd::setups_and_seeds(&a.setups, &a.seeds, a.episodes)?;
+    let (setups, seeds) = a.runs.parse()?;
+    let episodes = a.runs.episodes;
     let per_machine = cfg.world.episode_steps.div_ceil(cfg.task.prep_steps.max(1));
     let mut csv = String::from("setup,seed,episodes,parts_bound,machine_bound,robot_bound,p_max\n");
     println!("setup      bound (mean over seeds; machines / robots)   P_max");
@@ -40,7 +34,7 @@ pub fn run(a: BoundArgs) -> Result<()> {
         let mut all = [0.0f64; 3];
         for &seed in &seeds {
             let mut sum = [0u64; 3];
-            for ep in 0..a.episodes {
+            for ep in 0..episodes {
                 let env = Env::new(cfg.clone(), setup, eval_env_seed(seed, ep))
                     .with_context(|| format!("{setup} seed {seed} episode {ep}"))?;
                 let b = parts_bound(&env).expect("a fresh episode");
@@ -48,11 +42,11 @@ pub fn run(a: BoundArgs) -> Result<()> {
                 sum[1] += b.machines as u64;
                 sum[2] += b.robots as u64;
             }
-            let mean = sum.map(|s| s as f64 / a.episodes as f64);
+            let mean = sum.map(|s| s as f64 / episodes as f64);
             writeln!(
                 csv,
                 "{setup},{seed},{},{},{},{},{p_max}",
-                a.episodes, mean[0], mean[1], mean[2]
+                episodes, mean[0], mean[1], mean[2]
             )?;
             for k in 0..3 {
                 all[k] += mean[k] / seeds.len() as f64;

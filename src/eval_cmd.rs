@@ -19,15 +19,8 @@ pub struct EvalArgs {
     /// Scripted baseline instead of a checkpoint: greedy | greedy-orca | random.
     #[arg(long)]
     pub policy: Option<String>,
-    /// Comma-separated setups N.M_K.
-    #[arg(long, default_value = "6.4_2")]
-    pub setups: String,
-    /// Episodes per seed.
-    #[arg(long, default_value_t = 50)]
-    pub episodes: u64,
-    /// Comma-separated evaluation seeds.
-    #[arg(long, default_value = "0,1,2")]
-    pub seeds: String,
+    #[command(flatten)]
+    pub runs: Runs,
     /// Sample actions from the policy instead of taking the most probable one.
     #[arg(long)]
     pub sample: bool,
@@ -64,24 +57,39 @@ pub struct EvalArgs {
     pub out: Option<PathBuf>,
 }
 
-/// `--setups`, `--seeds` and `--episodes` as `tending eval` and `tending bound` take them.
-pub fn setups_and_seeds(
-    setups: &str,
-    seeds: &str,
-    episodes: u64,
-) -> Result<(Vec<Setup>, Vec<u64>)> {
-    let setups: Vec<Setup> = setups
-        .split(',')
-        .map(|s| s.trim().parse::<Setup>())
-        .collect::<Result<_, _>>()?;
-    let seeds: Vec<u64> = seeds
-        .split(',')
-        .map(|s| s.trim().parse::<u64>().context("--seeds"))
-        .collect::<Result<_>>()?;
-    if episodes == 0 || seeds.is_empty() {
-        bail!("need at least one episode and one seed");
+/// Which episodes are evaluated: `tending eval` runs them, `tending bound` bounds them
+/// (the same layouts for the same flags).
+#[derive(Args, Debug)]
+pub struct Runs {
+    /// Comma-separated setups N.M_K.
+    #[arg(long, default_value = "6.4_2")]
+    pub setups: String,
+    /// Episodes per seed.
+    #[arg(long, default_value_t = 50)]
+    pub episodes: u64,
+    /// Comma-separated evaluation seeds.
+    #[arg(long, default_value = "0,1,2")]
+    pub seeds: String,
+}
+
+impl Runs {
+    /// The setups and seeds, refused by name when malformed or empty.
+    pub fn parse(&self) -> Result<(Vec<Setup>, Vec<u64>)> {
+        let setups: Vec<Setup> = self
+            .setups
+            .split(',')
+            .map(|s| s.trim().parse::<Setup>())
+            .collect::<Result<_, _>>()?;
+        let seeds: Vec<u64> = self
+            .seeds
+            .split(',')
+            .map(|s| s.trim().parse::<u64>().context("--seeds"))
+            .collect::<Result<_>>()?;
+        if self.episodes == 0 || seeds.is_empty() {
+            bail!("need at least one episode and one seed");
+        }
+        Ok((setups, seeds))
     }
-    Ok((setups, seeds))
 }
 
 pub fn run(a: EvalArgs) -> Result<()> {
@@ -134,14 +142,15 @@ pub fn run(a: EvalArgs) -> Result<()> {
         _ => "scripted",
     };
     let cfg = crate::sim_cmd::load_config(&a.scenario)?;
-    let (setups, seeds) = setups_and_seeds(&a.setups, &a.seeds, a.episodes)?;
+    let (setups, seeds) = a.runs.parse()?;
+    let episodes = a.runs.episodes;
 
     let mut rows = vec![];
     let mut csv_rows = vec![];
     for &setup in &setups {
         let mut per_seed = vec![];
         for &seed in &seeds {
-            let ms = evaluate(&ctrl, &cfg, setup, seed, a.episodes)
+            let ms = evaluate(&ctrl, &cfg, setup, seed, episodes)
                 .with_context(|| format!("evaluate {setup} seed {seed}"))?;
             let eps: Vec<Numbers> = ms.iter().map(|m| Numbers::of(m, setup.robots)).collect();
             let r = Numbers::mean(&eps);
@@ -149,7 +158,7 @@ pub fn run(a: EvalArgs) -> Result<()> {
                 &label,
                 &setup.to_string(),
                 seed,
-                a.episodes,
+                episodes,
                 &r,
             ));
             per_seed.push(r);
@@ -168,8 +177,8 @@ pub fn run(a: EvalArgs) -> Result<()> {
         "# tending eval: {label}\n\n{mode}; {} episodes per seed, seeds {}; each seed's value \
          is the mean over its episodes, shown as mean (std) over seeds. Contacts are counted \
          per robot per step by kind (a robot-robot contact counts for both robots).\n\n{}",
-        a.episodes,
-        a.seeds,
+        episodes,
+        a.runs.seeds,
         markdown_table(&header, &rows)
     );
     println!("\n{md}");
