@@ -166,19 +166,15 @@ fn panel<DB: DrawingBackend>(
     sweep: bool,
 ) -> Result<(), DrawingAreaErrorKind<DB::ErrorType>> {
     let xmax = by.values().map(|p| p.1).fold(0.0, f64::max).max(1e-3) * 1.15;
-    let ymax = by.values().map(|p| p.0).fold(0.0, f64::max).max(1.0) * 1.15;
-    let ymin = if sweep {
+    let hi = by.values().map(|p| p.0).fold(0.0, f64::max).max(1.0);
+    // A sweep's points differ by a few parts: fit the axis to them, 15 % of the span
+    // (at least one part) either side; otherwise from 0 to 15 % above the highest.
+    let (ymin, ymax) = if sweep {
         let lo = by.values().map(|p| p.0).fold(f64::INFINITY, f64::min);
-        let hi = ymax / 1.15;
-        (lo - 0.15 * (hi - lo).max(1.0)).max(0.0)
+        let ymin = (lo - 0.15 * (hi - lo).max(1.0)).max(0.0);
+        (ymin, hi + 0.15 * (hi - ymin).max(1.0))
     } else {
-        0.0
-    };
-    let ymax = if sweep {
-        let hi = ymax / 1.15;
-        hi + 0.15 * (hi - ymin).max(1.0)
-    } else {
-        ymax
+        (0.0, hi * 1.15)
     };
     let mut c = ChartBuilder::on(area)
         .caption(setup, (chart::FONT, chart::CAPTION))
