@@ -17,7 +17,27 @@ use crate::greedy::{claimed_by_a_nearer_peer, greedy_target, GreedyParams, Targe
 use crate::{MACHINE_DIM, PEER_DIM, STORAGE_DIM};
 
 /// Number of target actions.
-pub const N_TARGET_ACTIONS: usize = 7;
+pub const N_TARGET_ACTIONS: usize = 8;
+
+/// Menu size of checkpoints trained before [`TargetAction::Matched`] existed: their
+/// outputs are the first 7 entries, whose meaning has not changed.
+pub const N_TARGET_ACTIONS_V1: usize = 7;
+
+/// Whether a policy with `n` outputs can run on this menu (the current one, or a prefix
+/// of it that older checkpoints were trained on).
+pub fn menu_size_ok(n: usize) -> bool {
+    n == N_TARGET_ACTIONS || n == N_TARGET_ACTIONS_V1
+}
+
+/// What a busy machine costs in [`matched_machine`], in control steps on top of the
+/// travel: half the default preparation time (20 steps), the expected wait at a machine
+/// whose pick was seen at a random moment. A nearer busy machine can so beat a farther
+/// ready one. Screened without retraining (seed 7, 20 episodes, the 7-entry bundled
+/// policy with "nearest busy" replaced by the matching): with 10 steps 6.4_2 35.1 ->
+/// 36.2 parts, 42.28_14 255.3 -> 263.9; ready machines strictly first (busy ones only
+/// by distance after every ready one) gave 35.9 / 263.6, 20 steps 35.9 / 263.8.
+/// docs/RESULTS.md 7.8.
+pub const MATCH_BUSY_STEPS: f32 = 10.0;
 
 /// The menu, by action index.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -42,6 +62,12 @@ pub enum TargetAction {
     NearestStorage = 5,
     /// Second-nearest storage area (a less crowded one).
     SecondStorage = 6,
+    /// The machine this robot gets in a matching of every part-less robot it observes
+    /// (itself included) to the machines ([`matched_machine`]): unlike the claim rule,
+    /// which only asks whether a nearer peer exists, no two robots are sent to the same
+    /// machine and no machine is left out while a robot is free. With a part: the nearest
+    /// storage area, as [`TargetAction::Greedy`].
+    Matched = 7,
 }
 
 impl TargetAction {
@@ -55,6 +81,7 @@ impl TargetAction {
             4 => NearestBusy,
             5 => NearestStorage,
             6 => SecondStorage,
+            7 => Matched,
             _ => return None,
         })
     }
@@ -70,6 +97,7 @@ impl TargetAction {
             NearestBusy => "nearest-busy",
             NearestStorage => "nearest-storage",
             SecondStorage => "second-storage",
+            Matched => "matched",
         }
     }
 }
@@ -111,7 +139,71 @@ pub fn target(
         NearestBusy => machine(0, &|m| !ready(m) && !claimed_by_a_nearer_peer(m, peers)),
         NearestStorage => storage(0),
         SecondStorage => storage(1),
+        // With a part: the nearest storage, as greedy, so that always asking for this
+        // entry is a complete script (matching-ORCA, the ablation in RESULTS 7.8).
+        Matched if own[2] > 0.5 => storage(0),
+        Matched => matched_machine(own, machines, peers, p).map(|i| Target {
+            rel: [machines[i * MACHINE_DIM], machines[i * MACHINE_DIM + 1]],
+            half: p.machine_half,
+        }),
     }
+}
+
+/// The machine (index in the observation) that a greedy matching gives this robot, or
+/// None when it carries a part or every machine went to a robot that is closer in cost.
+///
+/// Robots: this one and every part-less peer it observes. Cost of robot r at machine m:
+/// travel steps at K_speed from r to m's centre, plus [`MATCH_BUSY_STEPS`] when m has no
+/// ready part. Pairs are taken in increasing cost, each robot and machine at most once
+/// (ties in observation order, this robot first). Every robot observes the same fleet, so
+/// robots compute the same matching up to rounding and go to different machines with no
+/// messages between them. Greedy rather than optimal (Hungarian): it is what the claim
+/// rule extends, it is O(pairs log pairs), and the optimal assignment is not the goal
+/// anyway, since the matching is recomputed every step as parts appear and robots move.
+pub fn matched_machine(
+    own: &[f32],
+    machines: &[f32],
+    peers: &[f32],
+    p: &GreedyParams,
+) -> Option<usize> {
+    if own[2] > 0.5 {
+        return None;
+    }
+    let step = p.k_speed * p.dt;
+    let n_machines = machines.len() / MACHINE_DIM;
+    // Robot 0 is this one, at the origin of the relative frame.
+    let robots = std::iter::once([0.0f32, 0.0]).chain(
+        peers
+            .chunks_exact(PEER_DIM)
+            .filter(|q| q[2] < 0.5)
+            .map(|q| [q[0], q[1]]),
+    );
+    let mut pairs: Vec<(f32, u32, u32)> = Vec::new();
+    let mut n_robots = 0;
+    for (r, pos) in robots.enumerate() {
+        n_robots += 1;
+        for (j, m) in machines.chunks_exact(MACHINE_DIM).enumerate() {
+            let (dx, dy) = (m[0] - pos[0], m[1] - pos[1]);
+            let busy = if m[2] > 0.5 { 0.0 } else { MATCH_BUSY_STEPS };
+            pairs.push(((dx * dx + dy * dy).sqrt() / step + busy, r as u32, j as u32));
+        }
+    }
+    // Stable: equal costs keep generation order (this robot first, machines in order).
+    pairs.sort_by(|a, b| a.0.total_cmp(&b.0));
+    let mut robot_taken = vec![false; n_robots];
+    let mut machine_taken = vec![false; n_machines];
+    for (_, r, j) in pairs {
+        let (r, j) = (r as usize, j as usize);
+        if robot_taken[r] || machine_taken[j] {
+            continue;
+        }
+        if r == 0 {
+            return Some(j);
+        }
+        robot_taken[r] = true;
+        machine_taken[j] = true;
+    }
+    None
 }
 
 /// Relative position of the `rank`-th nearest entity (0 = nearest) among those `keep`
@@ -236,6 +328,72 @@ mod tests {
         // Every ready machine claimed: the entry is missing (stay, ADR 0014).
         let two_peers = [0.0, 0.45, 0.0, 0.95, 0.0, 0.0];
         assert_eq!(rel(TargetAction::NearestReady, &own, &two_peers), None);
+    }
+
+    #[test]
+    fn the_matching_gives_each_free_robot_its_own_machine() {
+        let p = params(); // 0.05 m per step
+        let own = [0.0, 0.0, 0.0];
+        // Two ready machines, right (0.5 m) and left (0.6 m). Alone: the nearer one.
+        let two_ready = [0.5, 0.0, 1.0, -0.6, 0.0, 1.0];
+        assert_eq!(matched_machine(&own, &two_ready, &[], &p), Some(0));
+        // A free peer right next to the right machine takes it: this robot gets the left
+        // one, where the claim rule would only have said "claimed".
+        let peer_right = [0.45, 0.0, 0.0];
+        assert_eq!(matched_machine(&own, &two_ready, &peer_right, &p), Some(1));
+        // A peer carrying a part is not matched.
+        let loaded_right = [0.45, 0.0, 1.0];
+        assert_eq!(
+            matched_machine(&own, &two_ready, &loaded_right, &p),
+            Some(0)
+        );
+        // Two free peers nearer to both machines: nothing left for this robot.
+        let two_peers = [0.45, 0.0, 0.0, -0.55, 0.0, 0.0];
+        assert_eq!(matched_machine(&own, &two_ready, &two_peers, &p), None);
+        // Carrying a part: no machine; the menu entry then names the nearest storage.
+        assert_eq!(matched_machine(&[0.0, 0.0, 1.0], &two_ready, &[], &p), None);
+        assert_eq!(
+            target(7, &[0.0, 0.0, 1.0], &two_ready, &STORAGES, &[], &p).map(|t| t.rel),
+            Some([0.0, -0.4])
+        );
+        // A busy machine costs MATCH_BUSY_STEPS (0.5 m here): a busy one at 0.2 m loses to
+        // a ready one at 0.6 m, a busy one at 0.05 m wins.
+        let busy_near = [0.2, 0.0, 0.0, -0.6, 0.0, 1.0];
+        assert_eq!(matched_machine(&own, &busy_near, &[], &p), Some(1));
+        let busy_nearer = [0.05, 0.0, 0.0, -0.6, 0.0, 1.0];
+        assert_eq!(matched_machine(&own, &busy_nearer, &[], &p), Some(0));
+        // Through the menu: entry 7 names the matched box; a 7-entry policy never asks.
+        assert_eq!(
+            target(7, &own, &two_ready, &STORAGES, &peer_right, &p).map(|t| t.rel),
+            Some([-0.6, 0.0])
+        );
+        assert!(menu_size_ok(7) && menu_size_ok(8) && !menu_size_ok(6));
+    }
+
+    #[test]
+    fn robots_agree_on_the_matching() {
+        // Three free robots (absolute positions) and three machines: each robot runs the
+        // matching from its own relative view; together they cover every machine once.
+        let p = params();
+        let robots = [[0.0f32, 0.0], [0.3, 0.1], [-0.4, 0.2]];
+        let machines = [[0.2f32, 0.0, 1.0], [-0.5, 0.3, 0.0], [0.6, 0.6, 1.0]];
+        let mut got = Vec::new();
+        for (i, me) in robots.iter().enumerate() {
+            let own = [me[0], me[1], 0.0];
+            let rel_m: Vec<f32> = machines
+                .iter()
+                .flat_map(|m| [m[0] - me[0], m[1] - me[1], m[2]])
+                .collect();
+            let rel_p: Vec<f32> = robots
+                .iter()
+                .enumerate()
+                .filter(|&(k, _)| k != i)
+                .flat_map(|(_, q)| [q[0] - me[0], q[1] - me[1], 0.0])
+                .collect();
+            got.push(matched_machine(&own, &rel_m, &rel_p, &p).unwrap());
+        }
+        got.sort_unstable();
+        assert_eq!(got, vec![0, 1, 2]);
     }
 
     #[test]

@@ -23,7 +23,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         Controller::greedy_orca()
     } else {
         let pol = Policy::load(ck)?;
-        if pol.actor().arch.n_actions != N_TARGET_ACTIONS {
+        if !obs::targets::menu_size_ok(pol.actor().arch.n_actions) {
             return Err(format!("{ck}: not a target-action policy").into());
         }
         Controller::filtered(Box::new(pol.actor().clone()), false)

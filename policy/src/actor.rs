@@ -157,6 +157,9 @@ impl Default for PpoActorConfig {
     }
 }
 
+/// Name prefix of the output layer's parameters.
+const ACTION_OUT: &str = "action_out";
+
 /// The policy network with its parameters, Adam state and activation caches.
 #[derive(Debug, Clone)]
 pub struct Actor {
@@ -179,7 +182,7 @@ impl Actor {
             arch.hidden,
             arch.n_actions,
             0.01,
-            "action_out",
+            ACTION_OUT,
             &mut params,
             &mut rng,
         );
@@ -205,6 +208,46 @@ impl Actor {
             let off = self.head.out.b.off;
             self.params.data[off + a] += delta;
         }
+    }
+
+    /// This actor with one more output, a copy of output `copy_of` (weights and bias), and
+    /// a fresh Adam: both outputs get equal logits, so the argmax (which keeps the lower
+    /// index on ties) acts as before, sampling splits the old output's probability evenly,
+    /// and training can learn where the new one is better. For a target-action actor
+    /// trained on an older, shorter menu (`obs::targets::N_TARGET_ACTIONS_V1`) whose new
+    /// entry refines an old one. Refused for an index outside the outputs.
+    pub fn with_copied_output(&self, copy_of: usize) -> Result<Self, String> {
+        let n = self.arch.n_actions;
+        if copy_of >= n {
+            return Err(format!("output {copy_of} does not exist ({n} outputs)"));
+        }
+        let mut arch = self.arch;
+        arch.n_actions = n + 1;
+        let mut wide = Actor::new(arch, 0);
+        let out_w = format!("{}.weight", ACTION_OUT);
+        let out_b = format!("{}.bias", ACTION_OUT);
+        for e in &wide.params.entries {
+            let old = self
+                .params
+                .entry(&e.name)
+                .ok_or_else(|| format!("parameter {} missing", e.name))?;
+            let src = &self.params.data[old.slot.r()];
+            let dst = &mut wide.params.data[e.slot.r()];
+            if e.name == out_w || e.name == out_b {
+                // [n, d_in] -> [n + 1, d_in]: old rows, then a copy of row `copy_of`.
+                let row = src.len() / n;
+                dst[..src.len()].copy_from_slice(src);
+                dst[src.len()..].copy_from_slice(&src[copy_of * row..(copy_of + 1) * row]);
+            } else if old.shape == e.shape {
+                dst.copy_from_slice(src);
+            } else {
+                return Err(format!(
+                    "parameter {} has shape {:?}, expected {:?}",
+                    e.name, old.shape, e.shape
+                ));
+            }
+        }
+        Ok(wide)
     }
 
     /// Forward over a chunk: `obs` has T*B rows, step-major (row t*B + b); `h0` B x H;

@@ -450,7 +450,7 @@ mod action_space_tests {
     use super::check_arch;
     use crate::{ActionSpace, ArchConfig};
 
-    /// Outputs must fit what they mean: 5 or 9 moves, 7 targets; a checkpoint written
+    /// Outputs must fit what they mean: 5 or 9 moves, 8 targets (or the older 7); a checkpoint written
     /// before the field existed reads as moves.
     #[test]
     fn outputs_must_fit_the_action_space() {

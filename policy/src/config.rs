@@ -65,7 +65,7 @@ impl ActionSpace {
             ActionSpace::Moves => {
                 n == obs::action::N_AXIS_ACTIONS || n == obs::action::N_ACTIONS_WITH_DIAGONALS
             }
-            ActionSpace::Targets => n == obs::targets::N_TARGET_ACTIONS,
+            ActionSpace::Targets => obs::targets::menu_size_ok(n),
         }
     }
 }

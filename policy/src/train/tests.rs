@@ -664,6 +664,55 @@ fn critic_warmup_freezes_the_actor_and_init_actor_checks_shapes() {
     assert!(err.contains("architecture"), "{err}");
 }
 
+/// A target-action actor with the older 7-entry menu starts an 8-entry run with the new
+/// "matched" output a copy of its "nearest busy" one: the first 7 logits are unchanged, the
+/// 8th equals the 5th, so argmax acts as before; anything else still has to match exactly.
+#[test]
+fn init_actor_widens_a_seven_entry_menu() {
+    use obs::targets::{TargetAction, N_TARGET_ACTIONS, N_TARGET_ACTIONS_V1};
+    let cfg = TrainConfig {
+        target_actions: true,
+        orca_filter: true,
+        ..TrainConfig::default()
+    };
+    let mut t = crowded(cfg.clone());
+    let mut arch = t.actor.arch;
+    arch.n_actions = N_TARGET_ACTIONS_V1;
+    let mut old = crate::Actor::new(arch, 3);
+    // A distinct bias per output, so a wrong copy shows.
+    for a in 0..N_TARGET_ACTIONS_V1 {
+        old.add_action_bias(a, a as f32 * 0.1);
+    }
+    t.init_actor(&old).unwrap();
+    assert_eq!(t.actor.arch.n_actions, N_TARGET_ACTIONS);
+
+    let mut env = sim::Env::new(ScenarioConfig::default(), Setup::new(4, 3, 2), 5).unwrap();
+    let mut o = obs::ObsBatch::default();
+    env.observe(&mut o);
+    let n = o.rows;
+    let (mut h_old, mut h_new) = (vec![0.0; n * arch.hidden], vec![0.0; n * arch.hidden]);
+    let masks = vec![1.0; n];
+    let lo = old.forward_step(&o, &mut h_old, &masks).unwrap().to_vec();
+    let mut wide = t.actor.clone();
+    let ln = wide.forward_step(&o, &mut h_new, &masks).unwrap().to_vec();
+    let busy = TargetAction::NearestBusy as usize;
+    for r in 0..n {
+        let (a, b) = (&lo[r * 7..(r + 1) * 7], &ln[r * 8..(r + 1) * 8]);
+        assert_eq!(a, &b[..7]);
+        assert_eq!(b[7], a[busy]);
+    }
+    assert_eq!(h_old, h_new);
+
+    // A 7-output actor of another width is still refused.
+    let mut other = arch;
+    other.hidden *= 2;
+    let err = t
+        .init_actor(&crate::Actor::new(other, 3))
+        .unwrap_err()
+        .to_string();
+    assert!(err.contains("architecture"), "{err}");
+}
+
 /// `diagonal_actions = true`: a 9-action actor that trains, saves, loads and evaluates
 /// (with and without the shield), and whose sampled rollouts use the diagonals.
 #[test]

@@ -59,7 +59,27 @@ impl Trainer {
     /// Start from a trained actor (e.g. fine-tuning the bundled policy behind a safety
     /// filter): its weights replace the fresh ones, with a fresh Adam. Refused unless its
     /// architecture is exactly this run's.
+    ///
+    /// One exception: a target-action actor with the older 7-entry menu
+    /// (`obs::targets::N_TARGET_ACTIONS_V1`) in a run with the current menu gets the new
+    /// "matched" entry as a copy of its "nearest busy" output (`Actor::with_copied_output`):
+    /// it starts acting exactly as before under argmax, and the fine-tune learns where
+    /// matching beats the claim rule (docs/RESULTS.md 7.8).
     pub fn init_actor(&mut self, actor: &Actor) -> Result<(), TrainError> {
+        let widened;
+        let mut actor = actor;
+        let mut older = actor.arch;
+        older.n_actions = obs::targets::N_TARGET_ACTIONS_V1;
+        if actor.arch.actions == crate::ActionSpace::Targets
+            && actor.arch == older
+            && self.actor.arch.n_actions == obs::targets::N_TARGET_ACTIONS
+            && obs::targets::N_TARGET_ACTIONS == obs::targets::N_TARGET_ACTIONS_V1 + 1
+        {
+            widened = actor
+                .with_copied_output(obs::targets::TargetAction::NearestBusy as usize)
+                .map_err(TrainError::Config)?;
+            actor = &widened;
+        }
         if actor.arch != self.actor.arch {
             return Err(TrainError::Config(format!(
                 "the initial actor's architecture {:?} differs from this run's {:?}",
