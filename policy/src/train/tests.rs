@@ -686,7 +686,7 @@ fn init_actor_widens_a_seven_entry_menu() {
     t.init_actor(&old).unwrap();
     assert_eq!(t.actor.arch.n_actions, N_TARGET_ACTIONS);
 
-    let mut env = sim::Env::new(ScenarioConfig::default(), Setup::new(4, 3, 2), 5).unwrap();
+    let env = sim::Env::new(ScenarioConfig::default(), Setup::new(4, 3, 2), 5).unwrap();
     let mut o = obs::ObsBatch::default();
     env.observe(&mut o);
     let n = o.rows;
