@@ -6,7 +6,6 @@
 //! cargo run --release -p policy --features train --example contact_sites -- CHECKPOINT|greedy-orca SETUP [EPISODES] [SEED]
 
 use policy::train::eval::{run_episode_watched, Controller};
-use policy::Policy;
 use sim::{ScenarioConfig, Setup};
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
@@ -17,12 +16,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let setup: Setup = setup.parse().map_err(|e| format!("SETUP {setup}: {e}"))?;
     let episodes: u64 = args.get(2).map_or(Ok(20), |s| s.parse())?;
     let seed: u64 = args.get(3).map_or(Ok(7), |s| s.parse())?;
-    let ctrl = if ck == "greedy-orca" {
-        Controller::greedy_orca()
-    } else {
-        let pol = Policy::load(ck)?;
-        Controller::filtered(Box::new(pol.actor().clone()), false)
-    };
+    let ctrl = Controller::script_or_filtered_checkpoint(ck)?;
     let cfg = ScenarioConfig::default();
     let touch = cfg.task.collision_distance;
     let mut prev_vel: Vec<[f32; 2]> = vec![];

@@ -7,8 +7,7 @@
 //! - `first`: before j's first pick of the episode (robots still arriving);
 //! - `at-box`: a part-less robot is within pick reach of j's box plus one step's travel
 //!   (arriving, or held off by the safety margin);
-//! - `en-route`: the nearest part-less robot is farther, but none is free nearer to j
-//!   than to any other ready machine (travel);
+//! - `en-route`: part-less robots exist, all of them farther than that (travel);
 //! - `none-free`: every robot carries a part.
 //!
 //! Also: parts picked but still carried at the end (`stranded`).
@@ -16,7 +15,6 @@
 //! cargo run --release -p policy --features train --example machine_waits -- CHECKPOINT|greedy-orca SETUP [EPISODES] [SEED]
 
 use policy::train::eval::{run_episode_hooked, Controller};
-use policy::Policy;
 use sim::{ScenarioConfig, Setup};
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
@@ -27,11 +25,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let setup: Setup = setup.parse().map_err(|e| format!("SETUP {setup}: {e}"))?;
     let episodes: u64 = args.get(2).map_or(Ok(10), |s| s.parse())?;
     let seed: u64 = args.get(3).map_or(Ok(0), |s| s.parse())?;
-    let ctrl = if ck == "greedy-orca" {
-        Controller::greedy_orca()
-    } else {
-        Controller::filtered(Box::new(Policy::load(ck)?.actor().clone()), false)
-    };
+    let ctrl = Controller::script_or_filtered_checkpoint(ck)?;
     let cfg = ScenarioConfig::default();
     // [first, at-box, en-route, none-free]
     let mut waits = [0u64; 4];
@@ -66,16 +60,13 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                     if !m.part_ready {
                         continue;
                     }
-                    let free: Vec<f32> = robots
-                        .iter()
-                        .filter(|r| !r.has_part)
-                        .map(|r| obs::geom::box_distance(m.centre, m.half, r.pos))
-                        .collect();
+                    let mut free = robots.iter().filter(|r| !r.has_part).peekable();
                     let class = if !picked_once[j] {
                         0
-                    } else if free.is_empty() {
+                    } else if free.peek().is_none() {
                         3
-                    } else if free.iter().any(|&d| d <= near) {
+                    } else if free.any(|r| obs::geom::box_distance(m.centre, m.half, r.pos) <= near)
+                    {
                         1
                     } else {
                         2

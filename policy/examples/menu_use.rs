@@ -7,7 +7,6 @@
 
 use obs::targets::{TargetAction, N_TARGET_ACTIONS};
 use policy::train::eval::{run_episode_hooked, Controller};
-use policy::Policy;
 use sim::{ScenarioConfig, Setup};
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
@@ -19,15 +18,12 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let episodes: u64 = args.get(2).map_or(Ok(10), |s| s.parse())?;
     // "greedy-orca" instead of a checkpoint: the script, for its share of robots carrying
     // (every robot-step counts as the "greedy" entry).
-    let ctrl = if ck == "greedy-orca" {
-        Controller::greedy_orca()
-    } else {
-        let pol = Policy::load(ck)?;
-        if !obs::targets::menu_size_ok(pol.actor().arch.n_actions) {
+    let ctrl = Controller::script_or_filtered_checkpoint(ck)?;
+    if let Controller::Filtered { actor, .. } = &ctrl {
+        if !obs::targets::menu_size_ok(actor.arch.n_actions) {
             return Err(format!("{ck}: not a target-action policy").into());
         }
-        Controller::filtered(Box::new(pol.actor().clone()), false)
-    };
+    }
     let cfg = ScenarioConfig::default();
     // counts[has_part][action]
     let mut counts = [[0u64; N_TARGET_ACTIONS]; 2];

@@ -52,6 +52,19 @@ impl Controller {
         }
     }
 
+    /// What the analysis examples (`menu_use`, `contact_sites`, `machine_waits`) take as
+    /// their first argument: "greedy-orca" for the script, else a checkpoint's actor behind
+    /// the ORCA filter as deployed ([`Self::filtered`], argmax).
+    pub fn script_or_filtered_checkpoint(
+        arg: &str,
+    ) -> Result<Self, crate::checkpoint::CheckpointError> {
+        if arg == "greedy-orca" {
+            return Ok(Self::greedy_orca());
+        }
+        let pol = crate::Policy::load(arg)?;
+        Ok(Self::filtered(Box::new(pol.actor().clone()), false))
+    }
+
     /// `actor` behind the ORCA filter at the clearances it was trained and is deployed
     /// with (`obs::orca::FILTER_CLEARANCE`, `obs::orca::FILTER_REST_CLEARANCE`).
     pub fn filtered(actor: Box<Actor>, sample: bool) -> Self {

@@ -68,12 +68,9 @@ impl Trainer {
     pub fn init_actor(&mut self, actor: &Actor) -> Result<(), TrainError> {
         let widened;
         let mut actor = actor;
-        let mut older = actor.arch;
-        older.n_actions = obs::targets::N_TARGET_ACTIONS_V1;
         if actor.arch.actions == crate::ActionSpace::Targets
-            && actor.arch == older
+            && actor.arch.n_actions == obs::targets::N_TARGET_ACTIONS_V1
             && self.actor.arch.n_actions == obs::targets::N_TARGET_ACTIONS
-            && obs::targets::N_TARGET_ACTIONS == obs::targets::N_TARGET_ACTIONS_V1 + 1
         {
             widened = actor
                 .with_copied_output(obs::targets::TargetAction::NearestBusy as usize)
