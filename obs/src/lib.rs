@@ -19,6 +19,7 @@ pub mod geom;
 pub mod greedy;
 pub mod orca;
 pub mod shield;
+pub mod storage_queue;
 pub mod targets;
 
 pub use flat::{FlatLayout, FLAT_PAD};

@@ -14,6 +14,7 @@
 //! "stay": the policy sees the flags and counts, and learns not to ask for it.
 
 use crate::greedy::{claimed_by_a_nearer_peer, greedy_target, GreedyParams, Target};
+use crate::storage_queue::{queued_storage, storage_full};
 use crate::{MACHINE_DIM, PEER_DIM, STORAGE_DIM};
 
 /// Number of target actions.
@@ -65,9 +66,10 @@ pub enum TargetAction {
     /// The machine this robot gets in a matching of every part-less robot it observes
     /// (itself included) to the machines ([`matched_machine`]): unlike the claim rule,
     /// which only asks whether a nearer peer exists, no two robots are sent to the same
-    /// machine and no machine is left out while a robot is free. With a part: the nearest
-    /// storage area, as [`TargetAction::Greedy`]. While the storages are crowded
-    /// ([`MATCH_MAX_CARRIERS_PER_STORAGE`]): greedy's choice.
+    /// machine and no machine is left out while a robot is free. While the storages are
+    /// crowded ([`MATCH_MAX_CARRIERS_PER_STORAGE`]): greedy's choice. With a part: the
+    /// storage with the shortest trip counting its queue, or none (make room) while the
+    /// storage is full ([`crate::storage_queue`]; until RESULTS 7.9 the nearest storage).
     Matched = 7,
 }
 
@@ -140,9 +142,17 @@ pub fn target(
         NearestBusy => machine(0, &|m| !ready(m) && !claimed_by_a_nearer_peer(m, peers)),
         NearestStorage => storage(0),
         SecondStorage => storage(1),
-        // With a part: the nearest storage, as greedy, so that always asking for this
-        // entry is a complete script (matching-ORCA, the ablation in RESULTS 7.8).
-        Matched if own[2] > 0.5 => storage(0),
+        // With a part: the storage with the shortest queue-counted trip, held back from
+        // while it is full (`crate::storage_queue`), so that always asking for this entry
+        // is a complete script (matching-ORCA, RESULTS 7.8-7.9).
+        Matched if own[2] > 0.5 => {
+            let k = queued_storage(storages, peers, p)?;
+            let rel = [storages[k * STORAGE_DIM], storages[k * STORAGE_DIM + 1]];
+            (!storage_full(rel, peers, p)).then_some(Target {
+                rel,
+                half: p.storage_half,
+            })
+        }
         // Storages crowded: the script's choice, which sends no one to a busy machine.
         Matched if storages_crowded(storages, peers) => {
             greedy_target(own, machines, storages, peers, p)
