@@ -14,6 +14,7 @@
 
 use crate::geom::{nearest_on_box, norm};
 use crate::greedy::{greedy_target, GreedyParams, Target};
+use crate::storage_queue::StorageMemory;
 use crate::targets;
 use dodgy_2d::{Agent, AvoidanceOptions, Obstacle, Vec2};
 use std::borrow::Cow;
@@ -232,6 +233,8 @@ pub struct GreedyOrca {
     /// Peers' absolute positions in the previous observation.
     prev_peers: Vec<[f32; 2]>,
     peers_now: Vec<[f32; 2]>,
+    /// The storage a carrier heads for under the "matched" entry (`crate::storage_queue`).
+    storage_memory: StorageMemory,
 }
 
 impl GreedyOrca {
@@ -242,6 +245,7 @@ impl GreedyOrca {
             prev_own: None,
             prev_peers: Vec::new(),
             peers_now: Vec::new(),
+            storage_memory: StorageMemory::default(),
         })
     }
 
@@ -249,10 +253,12 @@ impl GreedyOrca {
         &self.params
     }
 
-    /// Forget the previous observation (velocities read as zero on the next call).
+    /// Forget the previous observation (velocities read as zero on the next call) and the
+    /// storage a carrier was heading for.
     pub fn reset(&mut self) {
         self.prev_own = None;
         self.prev_peers.clear();
+        self.storage_memory.clear();
     }
 
     /// Velocity command (vx, vy), m/s, for one observation row (layout of `ObsBatch`):
@@ -308,14 +314,22 @@ impl GreedyOrca {
     /// A target action's preferred velocity (`crate::targets`): [`Self::preferred_towards`]
     /// the box it names on this row; zero for "stay" or a box that does not exist.
     pub fn target_preferred(
-        &self,
+        &mut self,
         action: u8,
         own: &[f32],
         machines: &[f32],
         storages: &[f32],
         peers: &[f32],
     ) -> [f32; 2] {
-        let t = targets::target(action, own, machines, storages, peers, &self.params.greedy);
+        let t = targets::target_kept(
+            action,
+            own,
+            machines,
+            storages,
+            peers,
+            &self.params.greedy,
+            &mut self.storage_memory,
+        );
         self.preferred_or_make_room(t, own, machines, storages)
     }
 
@@ -786,7 +800,7 @@ mod tests {
     #[test]
     fn a_robot_with_nowhere_to_go_keeps_off_walls_and_boxes() {
         let p = params();
-        let c = GreedyOrca::new(p).unwrap();
+        let mut c = GreedyOrca::new(p).unwrap();
         let r = p.greedy.robot_radius;
         let margin = r + p.clearance.min(0.4 * p.reach);
         let busy_far = [-0.8, 0.0, 0.0];
@@ -820,7 +834,7 @@ mod tests {
     /// target policy's "stay" makes room like greedy's idle robot.
     #[test]
     fn make_room_only_without_a_target() {
-        let c = GreedyOrca::new(params()).unwrap();
+        let mut c = GreedyOrca::new(params()).unwrap();
         let near = [0.0, 0.1];
         // a ready machine to the right: greedy heads there, storage or not
         let v = c.greedy_preferred(&[0.0, 0.0, 0.0], &[0.8, 0.0, 1.0], &near, &[]);

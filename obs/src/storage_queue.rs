@@ -52,11 +52,81 @@ pub fn storage_capacity(p: &GreedyParams) -> usize {
     ((perimeter / (SLOT_RADII * r)).floor() as usize).max(1)
 }
 
+/// A carrier keeps the storage it chose unless another one's queue-counted trip is
+/// shorter by more than this many steps (one carrier's worth of queue). Without it the
+/// choice flipped whenever the two costs crossed as carriers came and went: at 20.10_4
+/// (seed 7, 10 episodes, always "matched") 493 storage flips in 10,357 carrying steps,
+/// against 22 for the nearest storage; with it 107 (with 8 steps: 40, but -0.5 to -3 % of
+/// the parts). A flip reverses a robot its peers' ORCA expected to go on. docs/RESULTS.md 7.9.
+pub const SWITCH_STEPS: f32 = QUEUE_STEPS_PER_CARRIER;
+
+/// What a carrier remembers between decisions: the storage it is heading for, by absolute
+/// centre (relative positions move with the robot). Cleared when it has no part or asks
+/// for another menu entry; [`crate::orca::GreedyOrca`] holds one per robot.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct StorageMemory(Option<[f32; 2]>);
+
+impl StorageMemory {
+    pub fn clear(&mut self) {
+        self.0 = None;
+    }
+}
+
 /// Index (in the observation) of the storage a robot with a part should head for: fewest
 /// travel steps at K_speed plus [`QUEUE_STEPS_PER_CARRIER`] per carrier ahead in its
 /// queue. A carrier is in storage k's queue when k is its nearest storage, and ahead when
 /// it is nearer to k than this robot. None without storages. Ties: observation order.
+/// Stateless: see [`queued_storage_kept`] for the choice a robot sticks to.
 pub fn queued_storage(storages: &[f32], peers: &[f32], p: &GreedyParams) -> Option<usize> {
+    queue_costs(storages, peers, p)
+        .min_by(|a, b| a.0.total_cmp(&b.0))
+        .map(|(_, k)| k)
+}
+
+/// [`queued_storage`], but the storage in `memory` (if still observed) is kept unless
+/// another is cheaper by more than [`SWITCH_STEPS`]; the choice is written back. `own`:
+/// this robot's observation row (absolute position first).
+pub fn queued_storage_kept(
+    own: &[f32],
+    storages: &[f32],
+    peers: &[f32],
+    p: &GreedyParams,
+    memory: &mut StorageMemory,
+) -> Option<usize> {
+    let abs = |k: usize| {
+        [
+            own[0] + storages[k * STORAGE_DIM],
+            own[1] + storages[k * STORAGE_DIM + 1],
+        ]
+    };
+    let mut best: Option<(f32, usize)> = None;
+    let mut kept: Option<(f32, usize)> = None;
+    for (cost, k) in queue_costs(storages, peers, p) {
+        if best.is_none_or(|(b, _)| cost < b) {
+            best = Some((cost, k));
+        }
+        if let Some(m) = memory.0 {
+            let a = abs(k);
+            // The same box seen from a moved robot: equal up to float rounding.
+            if (a[0] - m[0]).abs() < 1e-3 && (a[1] - m[1]).abs() < 1e-3 {
+                kept = Some((cost, k));
+            }
+        }
+    }
+    let choice = match (best, kept) {
+        (Some((b, _)), Some((c, k))) if c <= b + SWITCH_STEPS => Some(k),
+        (b, _) => b.map(|(_, k)| k),
+    };
+    memory.0 = choice.map(abs);
+    choice
+}
+
+/// (queue-counted trip in steps, storage index) for every observed storage.
+fn queue_costs<'a>(
+    storages: &'a [f32],
+    peers: &'a [f32],
+    p: &GreedyParams,
+) -> impl Iterator<Item = (f32, usize)> + 'a {
     let n = storages.len() / STORAGE_DIM;
     let d2 = |k: usize, x: f32, y: f32| {
         let (dx, dy) = (
@@ -79,13 +149,10 @@ pub fn queued_storage(storages: &[f32], peers: &[f32], p: &GreedyParams) -> Opti
         }
     }
     let step = p.k_speed * p.dt;
-    (0..n)
-        .map(|k| {
-            let travel = d2(k, 0.0, 0.0).sqrt() / step;
-            (travel + QUEUE_STEPS_PER_CARRIER * ahead[k] as f32, k)
-        })
-        .min_by(|a, b| a.0.total_cmp(&b.0))
-        .map(|(_, k)| k)
+    (0..n).map(move |k| {
+        let travel = d2(k, 0.0, 0.0).sqrt() / step;
+        (travel + QUEUE_STEPS_PER_CARRIER * ahead[k] as f32, k)
+    })
 }
 
 /// Whether a robot with a part should hold back from the storage at `rel` (its centre
@@ -150,6 +217,46 @@ mod tests {
         let empty_handed: Vec<f32> = [[0.25, 0.0, 0.0], [0.28, 0.02, 0.0]].concat();
         assert_eq!(queued_storage(&storages, &empty_handed, &p), Some(0));
         assert_eq!(queued_storage(&[], &two, &p), None);
+    }
+
+    #[test]
+    fn a_carrier_keeps_its_storage_until_another_is_clearly_better() {
+        let p = params();
+        // Robot at (0, 0); storage 0 at 0.3 m (6 steps), storage 1 at 0.5 m (10 steps).
+        let own = [0.0, 0.0, 1.0];
+        let storages = [0.3, 0.0, -0.5, 0.0];
+        let mut memory = StorageMemory::default();
+        let two: Vec<f32> = [carrier(0.25, 0.0), carrier(0.28, 0.02)].concat();
+        // Two ahead at storage 0: 14 against 10, so storage 1, remembered.
+        assert_eq!(
+            queued_storage_kept(&own, &storages, &two, &p, &mut memory),
+            Some(1)
+        );
+        // The queue empties: storage 0 costs 6 against 10, within SWITCH_STEPS of it: keep 1.
+        assert_eq!(
+            queued_storage_kept(&own, &storages, &[], &p, &mut memory),
+            Some(1)
+        );
+        assert_eq!(queued_storage(&storages, &[], &p), Some(0));
+        // Seen after a move of 0.1 m to the left (relative positions shift): still 1.
+        let moved = [-0.1, 0.0, 1.0];
+        let storages_moved = [0.4, 0.0, -0.4, 0.0];
+        assert_eq!(
+            queued_storage_kept(&moved, &storages_moved, &[], &p, &mut memory),
+            Some(1)
+        );
+        // Back at (0, 0) with storage 0 just ahead (0.05 m, 1 step) against storage 1's
+        // 10: better by more than SWITCH_STEPS, switch.
+        let near = [0.05, 0.0, -0.5, 0.0];
+        assert_eq!(
+            queued_storage_kept(&own, &near, &[], &p, &mut memory),
+            Some(0)
+        );
+        memory.clear();
+        assert_eq!(
+            queued_storage_kept(&own, &storages, &two, &p, &mut memory),
+            Some(1)
+        );
     }
 
     #[test]

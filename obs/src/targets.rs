@@ -14,7 +14,7 @@
 //! "stay": the policy sees the flags and counts, and learns not to ask for it.
 
 use crate::greedy::{claimed_by_a_nearer_peer, greedy_target, GreedyParams, Target};
-use crate::storage_queue::{queued_storage, storage_full};
+use crate::storage_queue::{queued_storage_kept, storage_full, StorageMemory};
 use crate::{MACHINE_DIM, PEER_DIM, STORAGE_DIM};
 
 /// Number of target actions.
@@ -116,7 +116,27 @@ pub fn target(
     peers: &[f32],
     p: &GreedyParams,
 ) -> Option<Target> {
+    let mut fresh = StorageMemory::default();
+    target_kept(a, own, machines, storages, peers, p, &mut fresh)
+}
+
+/// [`target`] for a robot that remembers its storage choice between decisions
+/// ([`crate::storage_queue::SWITCH_STEPS`]): the planner's path. `memory` is cleared on
+/// every entry but "matched" with a part.
+pub fn target_kept(
+    a: u8,
+    own: &[f32],
+    machines: &[f32],
+    storages: &[f32],
+    peers: &[f32],
+    p: &GreedyParams,
+    memory: &mut StorageMemory,
+) -> Option<Target> {
     use TargetAction::*;
+    let action = TargetAction::from_index(a);
+    if !(own[2] > 0.5 && action == Some(Matched)) {
+        memory.clear();
+    }
     // The `rank`-th nearest machine that `keep` accepts.
     let machine = |rank: usize, keep: &dyn Fn(&[f32]) -> bool| {
         nth_nearest(machines, MACHINE_DIM, rank, keep).map(|rel| Target {
@@ -131,7 +151,7 @@ pub fn target(
             half: p.storage_half,
         })
     };
-    match TargetAction::from_index(a)? {
+    match action? {
         Stay => None,
         Greedy => {
             debug_assert_eq!(peers.len() % PEER_DIM, 0);
@@ -146,7 +166,7 @@ pub fn target(
         // while it is full (`crate::storage_queue`), so that always asking for this entry
         // is a complete script (matching-ORCA, RESULTS 7.8-7.9).
         Matched if own[2] > 0.5 => {
-            let k = queued_storage(storages, peers, p)?;
+            let k = queued_storage_kept(own, storages, peers, p, memory)?;
             let rel = [storages[k * STORAGE_DIM], storages[k * STORAGE_DIM + 1]];
             (!storage_full(rel, peers, p)).then_some(Target {
                 rel,

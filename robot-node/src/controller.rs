@@ -305,6 +305,9 @@ impl Controller for PolicyController {
         if let Some(f) = &mut self.filter {
             f.reset();
         }
+        if let Some(p) = &mut self.planner {
+            p.reset();
+        }
     }
     fn act(&mut self, obs: &ObsBatch) -> anyhow::Result<[f32; 2]> {
         let v = if self.has_target_actions() {
@@ -313,7 +316,7 @@ impl Controller for PolicyController {
                 .act(obs, &mut self.state, policy::ActMode::Greedy)?;
             let planner = self
                 .planner
-                .as_ref()
+                .as_mut()
                 .ok_or_else(|| anyhow::anyhow!("target-action policy without its planner"))?;
             planner.target_preferred(
                 a,

@@ -127,7 +127,7 @@ impl GreedyOrcaFleet {
     /// Preferred velocities of target actions (`obs::targets`), one per row of `obs`:
     /// straight for the box each action names, before any filter.
     pub fn target_velocities(
-        &self,
+        &mut self,
         obs: &ObsBatch,
         actions: &[u8],
         out: &mut Vec<[f32; 2]>,
@@ -139,7 +139,7 @@ impl GreedyOrcaFleet {
             });
         }
         out.clear();
-        out.extend(self.robots.iter().enumerate().map(|(r, c)| {
+        out.extend(self.robots.iter_mut().enumerate().map(|(r, c)| {
             c.target_preferred(
                 actions[r],
                 obs.own_row(r),
