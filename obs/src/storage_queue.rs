@@ -19,8 +19,8 @@ use crate::greedy::GreedyParams;
 use crate::{PEER_DIM, STORAGE_DIM};
 
 /// Steps a carrier expects to wait per carrier ahead of it in a storage's queue. Screened
-/// on seed 7 (20 episodes, always-matched script, with the hold below at 0.5 of a
-/// diameter per slot): 2 steps gave 40.40_2 136.6 parts, 80.40_4 236.6, 6.4_2 35.8,
+/// on seed 7 (20 episodes, always-matched script, with the hold below at one robot per
+/// 4 radii of edge): 2 steps gave 40.40_2 136.6 parts, 80.40_4 236.6, 6.4_2 35.8,
 /// 100.16_2 105.8; 4 steps 137.4 / 237.5 / 36.6 / 105.0 (without the choice: 109.3 /
 /// 204.6 / 35.6 / 98.5). docs/RESULTS.md 7.9.
 pub const QUEUE_STEPS_PER_CARRIER: f32 = 4.0;
