@@ -15,6 +15,7 @@
 //! Used by the "matched" menu entry ([`crate::targets::TargetAction::Matched`]) for a
 //! robot with a part; greedy and greedy-ORCA keep the nearest storage.
 
+use crate::geom::box_distance;
 use crate::greedy::GreedyParams;
 use crate::{PEER_DIM, STORAGE_DIM};
 
@@ -36,13 +37,6 @@ pub const NEAR_RADII: f32 = 4.0;
 /// (seed 7: 40.40_2 126.9 / 136.6 / 132.6 / 122.8 parts with a 2-step queue cost;
 /// 8 radii also cost 100.16_2 and 100.8_1 5-13 %). docs/RESULTS.md 7.9.
 pub const SLOT_RADII: f32 = 4.0;
-
-/// Distance from a point (relative to the box centre) to a box of half extents `half`.
-fn gap_to_box(rel: [f32; 2], half: [f32; 2]) -> f32 {
-    let dx = (rel[0].abs() - half[0]).max(0.0);
-    let dy = (rel[1].abs() - half[1]).max(0.0);
-    (dx * dx + dy * dy).sqrt()
-}
 
 /// Robots a storage area has room for near its edge ([`SLOT_RADII`]), at least one.
 pub fn storage_capacity(p: &GreedyParams) -> usize {
@@ -160,12 +154,13 @@ fn queue_costs<'a>(
 /// least [`storage_capacity`] observed peers, with a part or not, already are.
 pub fn storage_full(rel: [f32; 2], peers: &[f32], p: &GreedyParams) -> bool {
     let near = NEAR_RADII * p.robot_radius;
-    if gap_to_box([-rel[0], -rel[1]], p.storage_half) <= near {
+    // Negative inside the box; every test here is "within `near`", so that is harmless.
+    if box_distance(rel, p.storage_half, [0.0, 0.0]) <= near {
         return false;
     }
     let near_peers = peers
         .chunks_exact(PEER_DIM)
-        .filter(|q| gap_to_box([q[0] - rel[0], q[1] - rel[1]], p.storage_half) <= near)
+        .filter(|q| box_distance(rel, p.storage_half, [q[0], q[1]]) <= near)
         .count();
     near_peers >= storage_capacity(p)
 }
