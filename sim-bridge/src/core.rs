@@ -423,6 +423,16 @@ impl Core {
             .count()
     }
 
+    /// Initial robots that have not yet sent a command computed from state (a stamped one):
+    /// the realtime start waits for none (`wait_for_robots`).
+    pub fn initial_robots_waiting(&self) -> Vec<&str> {
+        self.robots
+            .iter()
+            .filter(|(_, s)| s.initial && s.cmd_stamp.is_none())
+            .map(|(n, _)| n.as_str())
+            .collect()
+    }
+
     /// Robots by name: position and has_part.
     pub fn robot_states(&self) -> Vec<(String, [f32; 2], bool)> {
         self.env

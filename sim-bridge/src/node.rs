@@ -352,6 +352,8 @@ struct Bridge<'a> {
     next_metrics: Instant,
     /// Lockstep start: when every initial robot's cmd_vel was discovered (+ settle).
     all_discovered_at: Option<Instant>,
+    /// The simulator steps (lockstep: the first state went out; realtime: every initial
+    /// robot commands from state, see `wait_for_robots`).
     started: bool,
 }
 
@@ -416,7 +418,7 @@ impl<'a> Bridge<'a> {
             next_discovery: t_start,
             metrics_period,
             next_metrics: t_start + metrics_period,
-            started: p.mode == Mode::Realtime,
+            started: p.mode == Mode::Realtime && !p.wait_for_robots,
         };
         for n in b.initial.clone() {
             b.subscribe_cmd(&n)?;
@@ -594,7 +596,8 @@ impl<'a> Bridge<'a> {
         }
     }
 
-    /// Real time: step at the rate, whatever the robots sent.
+    /// Real time: step at the rate, whatever the robots sent (once started: see
+    /// `wait_for_robots`).
     fn step_realtime(&mut self, t: f64) -> anyhow::Result<()> {
         if Instant::now() < self.next_tick {
             return Ok(());
@@ -602,6 +605,23 @@ impl<'a> Bridge<'a> {
         self.next_tick += self.period;
         if self.next_tick < Instant::now() {
             self.next_tick = Instant::now() + self.period;
+        }
+        if !self.started {
+            let waiting = self.core.initial_robots_waiting();
+            if !waiting.is_empty() && t < self.p.startup_grace_s {
+                // the first state again, at the rate: robots still starting get it too
+                return self.publish_state(true);
+            }
+            if waiting.is_empty() {
+                info!("every initial robot commands from state: the simulator starts");
+            } else {
+                warn!(
+                    "realtime start after {:.1} s without commands from {}",
+                    self.p.startup_grace_s,
+                    waiting.join(", ")
+                );
+            }
+            self.started = true;
         }
         for n in self.core.expire(t) {
             info!("removed /{n}: cmd_vel stale");

@@ -14,6 +14,8 @@ pub const USAGE: &str = "usage: sim_bridge [--ros-args [-p NAME:=VALUE]... [--pa
 parameters: setup (6.4_2), seed (0), mode (realtime|lockstep), rate_hz (10), stale_timeout_s (2.0),
             config (scenario TOML; default: built-in), spawn_initial (true), max_steps (0 = run until stopped),
             lockstep_timeout_s (2.0), startup_grace_s (10.0), settle_s (2.0), metrics_period_s (1.0),
+            wait_for_robots (true: realtime holds the simulator at its first state until every
+            initial robot commands from state, at most startup_grace_s),
             discovery_period_s (0.5), record (bag directory: record every published topic and every
             received cmd_vel as a rosbag2 MCAP bag; default: none), stdin_commands (false: also read
             /tending/command lines from stdin), test_cmd_delay_ms (0: fault injection, hold every
@@ -53,6 +55,10 @@ pub struct BridgeParams {
     pub lockstep_timeout_s: f64,
     /// Initial bodies are kept this long without any cmd_vel.
     pub startup_grace_s: f64,
+    /// Realtime: hold the simulator at its first state (published at the rate) until every
+    /// initial robot sends a command computed from state, or `startup_grace_s` runs out.
+    /// Without it the first robots up drive among peers that do not move yet.
+    pub wait_for_robots: bool,
     /// Lockstep: wait this long after every initial robot's cmd_vel was discovered before
     /// publishing the first state (robot nodes finish their own discovery meanwhile).
     pub settle_s: f64,
@@ -89,6 +95,7 @@ impl Default for BridgeParams {
             max_steps: 0,
             lockstep_timeout_s: 2.0,
             startup_grace_s: 10.0,
+            wait_for_robots: true,
             settle_s: 2.0,
             metrics_period_s: 1.0,
             discovery_period_s: 0.5,
@@ -156,6 +163,7 @@ fn apply_param(p: &mut BridgeParams, n: &str, v: &ParamValue) -> Result<bool, Ar
         "test_state_delay_ms" => p.test_state_delay_ms = delay_ms(n, v)?,
         "stdin_commands" => p.stdin_commands = boolean(n, v)?,
         "spawn_initial" => p.spawn_initial = boolean(n, v)?,
+        "wait_for_robots" => p.wait_for_robots = boolean(n, v)?,
         "use_sim_time" => {} // the bridge is the clock
         _ => return Ok(false),
     }

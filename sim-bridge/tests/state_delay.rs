@@ -42,6 +42,8 @@ fn spawn_bridge(domain: u16, delay_ms: f64) -> Bridge {
         .env("ROS_DOMAIN_ID", domain.to_string())
         .args(["--ros-args", "-p", "setup:=2.2_1", "-p", "seed:=0"])
         .args(["-p", "startup_grace_s:=600", "-p", "metrics_period_s:=0.1"])
+        // no robot nodes here: step without waiting for them
+        .args(["-p", "wait_for_robots:=false"])
         .args(["-p", &format!("test_state_delay_ms:={delay_ms}")])
         .stdin(Stdio::null())
         .stdout(Stdio::piped())

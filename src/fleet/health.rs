@@ -81,7 +81,10 @@ impl Health {
         }
         if let (Some(rate), Some(prev)) = (self.rate_hz, self.prev) {
             let dt = s.wall.saturating_sub(prev.wall).as_secs_f64();
-            if dt > 0.5 {
+            // At step 0 with robots missing the bridge is holding its first state until
+            // they command (`wait_for_robots`): the robots' count above says so.
+            let holding = s.step == 0 && s.robots_on_state < s.robots_expected.max(1);
+            if dt > 0.5 && !holding {
                 let hz = s.step.saturating_sub(prev.step) as f64 / dt;
                 if hz < MIN_RATE_FRACTION * rate {
                     p.push(format!("bridge stepping at {hz:.1} Hz (want {rate})"));
@@ -242,6 +245,24 @@ mod tests {
             "{p:?}"
         );
         assert!(h.verdict().is_some());
+    }
+
+    #[test]
+    fn a_bridge_holding_for_missing_robots_is_not_a_stall_but_the_robots_are() {
+        let mut h = Health::new(Some(10.0));
+        for t in 0..8 {
+            h.observe(at(t, 0, 18, 20, 0));
+        }
+        let p = h.persistent();
+        assert_eq!(p.0.len(), 1, "{p:?}");
+        assert!(p.0[0].contains("2/20 robots"), "{p:?}");
+        // every robot on state and still step 0: the bridge is stuck
+        let mut h = Health::new(Some(10.0));
+        for t in 0..8 {
+            h.observe(at(t, 0, 20, 20, 0));
+        }
+        let p = h.persistent();
+        assert!(p.0.iter().any(|x| x.contains("0.0 Hz")), "{p:?}");
     }
 
     #[test]

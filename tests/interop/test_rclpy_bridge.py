@@ -112,7 +112,8 @@ def bridge(tmp_path_factory):
     log = tmp_path_factory.mktemp('bridge') / 'sim_bridge.log'
     # initial robots get no cmd_vel here: keep them past the default 10 s start-up grace
     b.proc = Proc([SIM_BRIDGE, '--ros-args', '-p', 'setup:=6.4_2', '-p', 'seed:=3',
-                   '-p', 'startup_grace_s:=300', '-p', 'metrics_period_s:=0.5'],
+                   '-p', 'startup_grace_s:=300', '-p', 'wait_for_robots:=false',
+                   '-p', 'metrics_period_s:=0.5'],
                   log, child_env(d))
     try:
         ros.spin_until(lambda: len(_names(b.rust_topics(), 'machine', 'pose')) == N_MACHINES
@@ -334,7 +335,8 @@ def test_robot_node_tends_in_the_bridge_watched_by_rclpy(tmp_path):
     metrics = Inbox(ros, DiagnosticArray, '/tending/metrics', VISUALIZATION)
     env = child_env(d)
     procs = [Proc([SIM_BRIDGE, '--ros-args', '-p', 'setup:=6.4_2', '-p', 'seed:=3',
-                   '-p', 'startup_grace_s:=300', '-p', 'metrics_period_s:=0.5'],
+                   '-p', 'startup_grace_s:=300', '-p', 'wait_for_robots:=false',
+                   '-p', 'metrics_period_s:=0.5'],
                   tmp_path / 'sim_bridge.log', env),
              Proc([ROBOT_NODE, '--ros-args', '-r', '__ns:=/robot_0', '-p', 'use_sim_time:=true'],
                   tmp_path / 'robot_node.log', env)]

@@ -91,7 +91,8 @@ def test_an_insecure_rclpy_node_reads_nothing_and_moves_nothing(ros, spawn, tmp_
 
         # robot_0 is kept (no cmd_vel from a node of its own) for the whole test.
         bridge = spawn([SIM_BRIDGE, '--ros-args', '-p', 'setup:=2.2_2', '-p', 'seed:=0',
-                        '-p', 'startup_grace_s:=300', '-p', 'metrics_period_s:=0.5',
+                        '-p', 'startup_grace_s:=300', '-p', 'wait_for_robots:=false',
+                        '-p', 'metrics_period_s:=0.5',
                         '-p', f'record:={bag}', '--enclave', '/tending/sim_bridge'],
                        name='sim_bridge', **secure(ks))
         robot = spawn([ROBOT_NODE, '--ros-args', '-r', '__ns:=/robot_1',

@@ -140,3 +140,27 @@ fn run_time_commands() {
         "{json}"
     );
 }
+
+#[test]
+fn the_realtime_start_waits_for_commands_from_state_from_initial_robots_only() {
+    let mut c = core(Mode::Realtime);
+    assert_eq!(c.initial_robots_waiting().len(), 6);
+    let k0 = c.stamp_key();
+    // an unstamped command (robot_node before it has state) does not count
+    c.on_cmd("robot_0", &Twist::planar(0.0, 0.0), None, 0.1);
+    assert_eq!(c.initial_robots_waiting().len(), 6);
+    for i in 0..5 {
+        c.on_cmd(
+            &format!("robot_{i}"),
+            &Twist::planar(0.1, 0.0),
+            Some(k0),
+            0.2,
+        );
+    }
+    assert_eq!(c.initial_robots_waiting(), vec!["robot_5"]);
+    // a robot added live is not waited for
+    c.on_cmd("rover", &Twist::planar(0.0, 0.0), None, 0.3);
+    assert_eq!(c.initial_robots_waiting(), vec!["robot_5"]);
+    c.on_cmd("robot_5", &Twist::planar(0.1, 0.0), Some(k0), 0.4);
+    assert!(c.initial_robots_waiting().is_empty());
+}
