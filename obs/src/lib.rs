@@ -14,6 +14,7 @@
 //! one GEMM per group.
 
 pub mod action;
+pub mod detour;
 mod flat;
 pub mod geom;
 pub mod greedy;
