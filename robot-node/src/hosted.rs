@@ -121,14 +121,10 @@ fn log_outcome(h: &mut Hosted, log: &NodeLoggingHandle, r: &TickResult, what: &s
 
 /// Wall clock or sim time: one control step of `h` now, and its command.
 pub(crate) fn tick_now(h: &mut Hosted, log: &NodeLoggingHandle, now: f64) {
-    let r = h.brain.tick(now);
     // A command computed from state carries the stamp of the robot's own pose it used (as
     // in lockstep), so the bridge can tell robots that receive its state from robots that
     // only send zeros (`robots_on_state`, the fleet's health check); none otherwise.
-    let stamp = match r.outcome {
-        Outcome::Command => h.brain.world.own_pose_stamp(),
-        _ => None,
-    };
+    let (r, stamp) = h.brain.tick_once_per_state(now);
     h.publish(r.velocity, stamp);
     log_outcome(h, log, &r, "controlling");
 }

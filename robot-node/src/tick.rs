@@ -41,6 +41,8 @@ pub struct Brain {
     pub k_speed: f64,
     pub counters: Counters,
     own_ok: bool,
+    /// Realtime: the state (own pose stamp) the last command was computed from, and it.
+    last_command: Option<(i64, [f64; 2])>,
 }
 
 impl Brain {
@@ -51,17 +53,51 @@ impl Brain {
             k_speed,
             counters: Counters::default(),
             own_ok: false,
+            last_command: None,
         }
     }
 
     /// Reset the controller state (e.g. sim time went backwards: new episode).
     pub fn reset(&mut self) {
         self.controller.reset();
+        self.last_command = None;
     }
 
     pub fn tick(&mut self, now: f64) -> TickResult {
         let obs = self.world.observation(now);
         self.tick_on(obs)
+    }
+
+    /// Real time: act once per state, and the stamp of the own pose the command answers
+    /// (None when it was not computed from state). The control timer and the bridge's step
+    /// run on separate clocks, so a tick sometimes finds no new state; acting on it again
+    /// would feed the planner the same positions twice (its velocity estimates read zero,
+    /// then double, and a robot looks stuck to the detour rule, `obs::detour`) and step a
+    /// recurrent policy twice on one observation, unlike training. Such a tick sends the
+    /// last command again instead, while its state is fresh (counted in `ticks`,
+    /// `commands` and `repeated_commands`).
+    pub fn tick_once_per_state(&mut self, now: f64) -> (TickResult, Option<i64>) {
+        let stamp = self.world.own_pose_stamp();
+        if let (Some(s), Some((last, v))) = (stamp, self.last_command) {
+            if s == last && self.world.observation(now).is_ok() {
+                self.counters.ticks += 1;
+                self.counters.commands += 1;
+                self.counters.repeated_commands += 1;
+                let r = TickResult {
+                    velocity: v,
+                    outcome: Outcome::Command,
+                    counts: None,
+                };
+                return (r, Some(s));
+            }
+        }
+        let r = self.tick(now);
+        let stamp = match r.outcome {
+            Outcome::Command => stamp,
+            _ => None,
+        };
+        self.last_command = stamp.map(|s| (s, r.velocity));
+        (r, stamp)
     }
 
     /// Lockstep: act on simulator state `stamp` (only data carrying that stamp).
@@ -192,6 +228,51 @@ mod tests {
         assert_eq!(r.velocity, [0.0, 0.0]);
         assert_eq!(b.counters.commands, 1);
         assert_eq!(b.counters.zero_own_stale, 2);
+    }
+
+    /// Counts its `act` calls; commands (0.1 x calls, 0).
+    struct Counting(usize);
+    impl Controller for Counting {
+        fn reset(&mut self) {}
+        fn act(&mut self, _: &obs::ObsBatch) -> anyhow::Result<[f32; 2]> {
+            self.0 += 1;
+            Ok([0.1 * self.0 as f32, 0.0])
+        }
+        fn name(&self) -> &'static str {
+            "counting"
+        }
+    }
+
+    #[test]
+    fn real_time_acts_once_per_state_and_repeats_the_command_between() {
+        let mut b = Brain::new(world(), Box::new(Counting(0)), 0.5);
+        let own = |w: &mut World, stamp: f64, at: f64| {
+            let pose = PoseStamped::planar(Time::from_secs_f64(stamp), "map", -0.5, -0.5);
+            w.on_pose(&robot("robot_0", Leaf::Pose), &pose, at).unwrap();
+        };
+        feed(&mut b.world, 0.0);
+        own(&mut b.world, 0.1, 0.0);
+        let (r, s1) = b.tick_once_per_state(0.05);
+        assert_eq!(
+            (r.velocity, r.outcome.clone()),
+            ([0.1f32 as f64, 0.0], Outcome::Command)
+        );
+        assert!(s1.is_some());
+        // no new state: the same command and stamp, the controller not called
+        let (r, s) = b.tick_once_per_state(0.1);
+        assert_eq!((r.velocity, s), ([0.1f32 as f64, 0.0], s1));
+        assert_eq!(b.counters.repeated_commands, 1);
+        // a new state: acted on
+        feed(&mut b.world, 0.2);
+        own(&mut b.world, 0.2, 0.2);
+        let (r, s2) = b.tick_once_per_state(0.25);
+        assert_eq!(r.velocity, [0.2f32 as f64, 0.0]);
+        assert!(s2 > s1);
+        // the state goes stale: zero, not the last command
+        let (r, s) = b.tick_once_per_state(5.0);
+        assert_eq!((r.velocity, s), ([0.0, 0.0], None));
+        assert!(matches!(r.outcome, Outcome::OwnStale(_)));
+        assert_eq!((b.counters.ticks, b.counters.commands), (4, 3));
     }
 
     #[test]

@@ -89,6 +89,9 @@ pub struct Counters {
     pub writer_changes: u64,
     pub ticks: u64,
     pub commands: u64,
+    /// Realtime: ticks that found no new state and sent the last command again (counted
+    /// in `ticks` and `commands` too).
+    pub repeated_commands: u64,
     pub zero_own_stale: u64,
     pub zero_obs_invalid: u64,
     pub zero_controller_error: u64,
@@ -136,6 +139,7 @@ impl Counters {
         self.writer_changes += o.writer_changes;
         self.ticks += o.ticks;
         self.commands += o.commands;
+        self.repeated_commands += o.repeated_commands;
         self.zero_own_stale += o.zero_own_stale;
         self.zero_obs_invalid += o.zero_obs_invalid;
         self.zero_controller_error += o.zero_controller_error;
@@ -161,6 +165,7 @@ impl Counters {
             "writer_changes": self.writer_changes,
             "ticks": self.ticks,
             "commands": self.commands,
+            "repeated_commands": self.repeated_commands,
             "zero": {
                 "own_stale": self.zero_own_stale,
                 "obs_invalid": self.zero_obs_invalid,
