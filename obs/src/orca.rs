@@ -239,7 +239,10 @@ pub struct GreedyOrca {
     peers_now: Vec<[f32; 2]>,
     /// The storage a carrier heads for under the "matched" entry (`crate::storage_queue`).
     storage_memory: StorageMemory,
-    /// Steps in a row the robot has not moved although it wanted to.
+    /// The robot's position at the planner's previous call, and the steps in a row it has
+    /// not moved since although it wanted to (kept by the planner, not the filter: robot_node
+    /// runs them as two instances).
+    planned_from: Option<[f32; 2]>,
     stuck_steps: u32,
     /// Steps left going around a box ([`crate::detour`]) after being stuck.
     detour_left: u32,
@@ -270,6 +273,7 @@ impl GreedyOrca {
             prev_peers: Vec::new(),
             peers_now: Vec::new(),
             storage_memory: StorageMemory::default(),
+            planned_from: None,
             stuck_steps: 0,
             detour_left: 0,
         })
@@ -285,6 +289,7 @@ impl GreedyOrca {
         self.prev_own = None;
         self.prev_peers.clear();
         self.storage_memory.clear();
+        self.planned_from = None;
         self.stuck_steps = 0;
         self.detour_left = 0;
     }
@@ -299,6 +304,7 @@ impl GreedyOrca {
         peers: &[f32],
     ) -> [f32; 2] {
         let pref = self.greedy_preferred(own, machines, storages, peers);
+        self.note_progress(own, machines, storages, pref);
         self.filter(own, machines, storages, peers, pref)
     }
 
@@ -358,7 +364,42 @@ impl GreedyOrca {
             &self.params.greedy,
             &mut self.storage_memory,
         );
-        self.preferred_or_make_room(t, own, machines, storages)
+        let pref = self.preferred_or_make_room(t, own, machines, storages);
+        self.note_progress(own, machines, storages, pref);
+        pref
+    }
+
+    /// Once per step, after planning `pref`: count the steps the robot has not moved
+    /// although it wanted to, at a box, and start a detour ([`crate::detour`]) after
+    /// [`STUCK_STEPS`] of them.
+    fn note_progress(&mut self, own: &[f32], machines: &[f32], storages: &[f32], pref: [f32; 2]) {
+        let g = &self.params.greedy;
+        let (r, k) = (g.robot_radius, g.k_speed);
+        let pos = [own[0], own[1]];
+        // a jump of more than two full steps is a reset or a teleport, not progress
+        let moved = self
+            .planned_from
+            .map(|q| norm([pos[0] - q[0], pos[1] - q[1]]))
+            .filter(|&d| d <= 2.0 * k * g.dt);
+        self.planned_from = Some(pos);
+        // stuck *at a box*: a robot held up by peers waits for them instead
+        let at_box = || {
+            let reach = r + self.box_clearance() + STUCK_BOX_RADII * r;
+            observed_boxes(machines, storages, g)
+                .any(|(c, h)| crate::geom::box_distance(c, h, [0.0, 0.0]) < reach)
+        };
+        let wanted = pref[0].is_finite() && pref[1].is_finite() && norm(pref) > 0.5 * k;
+        if moved.is_some_and(|d| d < 0.1 * k * g.dt) && wanted && at_box() {
+            self.stuck_steps += 1;
+        } else {
+            self.stuck_steps = 0;
+        }
+        if self.stuck_steps >= STUCK_STEPS {
+            self.stuck_steps = 0;
+            self.detour_left = DETOUR_STEPS;
+        } else {
+            self.detour_left = self.detour_left.saturating_sub(1);
+        }
     }
 
     /// [`Self::preferred_towards`] `target`. With no target: out of an obstacle's margin
@@ -524,23 +565,6 @@ impl GreedyOrca {
             }
         };
         let own_vel = self.prev_own.map_or([0.0, 0.0], |q| vel_of(pos, q));
-        // stuck *at a box*: a robot held up by peers waits for them instead
-        let at_box = || {
-            let reach = r + self.box_clearance() + STUCK_BOX_RADII * r;
-            observed_boxes(machines, storages, g)
-                .any(|(c, h)| crate::geom::box_distance(c, h, [0.0, 0.0]) < reach)
-        };
-        if self.prev_own.is_some() && norm(pref) > 0.5 * k && norm(own_vel) < 0.1 * k && at_box() {
-            self.stuck_steps += 1;
-        } else {
-            self.stuck_steps = 0;
-        }
-        if self.stuck_steps >= STUCK_STEPS {
-            self.stuck_steps = 0;
-            self.detour_left = DETOUR_STEPS;
-        } else {
-            self.detour_left = self.detour_left.saturating_sub(1);
-        }
         self.peers_now.clear();
         self.peers_now.extend(
             peers
