@@ -9,8 +9,8 @@
 //! and 41 at 42.28_14, typically right beside the machine it had just picked from, whose
 //! far side faced the storage.
 //!
-//! The planner (`crate::orca::GreedyOrca`) calls it only once a robot has been stuck for
-//! `STUCK_STEPS`, and then for `DETOUR_STEPS`: going for corners whenever a line met a
+//! The planner (`crate::orca::GreedyOrca`) calls it only once a robot has been stuck at a
+//! box for `STUCK_STEPS`, and then for `DETOUR_STEPS`: going for corners whenever a line met a
 //! grown box lengthened paths that ORCA's slide along a face handles well (-3 % parts).
 //!
 //! [`waypoint`] gives the point to head for instead: the goal when the straight segment

@@ -79,7 +79,7 @@ impl Brain {
     pub fn tick_once_per_state(&mut self, now: f64) -> (TickResult, Option<i64>) {
         let stamp = self.world.own_pose_stamp();
         if let (Some(s), Some((last, v))) = (stamp, self.last_command) {
-            if s == last && self.world.observation(now).is_ok() {
+            if s == last && self.world.own_inputs(now).is_ok() {
                 self.counters.ticks += 1;
                 self.counters.commands += 1;
                 self.counters.repeated_commands += 1;

@@ -408,9 +408,9 @@ impl World {
     ///
     /// A machine needs a fresh pose and part_ready, a storage a fresh pose, a peer a
     /// fresh pose and has_part; anything else is left out. Entities are ordered by id.
-    pub fn observation(&self, now: f64) -> Result<obs::ObsBuilder, OwnStale> {
+    /// The robot's own position and has_part at `now`, or why they cannot be used.
+    pub fn own_inputs(&self, now: f64) -> Result<([f64; 2], bool), OwnStale> {
         let rt = self.cfg.stale_timeout_s;
-        let st = self.cfg.static_stale_timeout_s;
         let pos = match (&self.own.pose, Sample::fresh(&self.own.pose, now, rt)) {
             (None, _) => return Err(OwnStale::NoPose),
             (Some(_), None) => return Err(OwnStale::PoseStale),
@@ -421,6 +421,13 @@ impl World {
             (Some(_), None) => return Err(OwnStale::HasPartStale),
             (_, Some(h)) => h,
         };
+        Ok((pos, has_part))
+    }
+
+    pub fn observation(&self, now: f64) -> Result<obs::ObsBuilder, OwnStale> {
+        let rt = self.cfg.stale_timeout_s;
+        let st = self.cfg.static_stale_timeout_s;
+        let (pos, has_part) = self.own_inputs(now)?;
         let f = |p: [f64; 2]| [p[0] as f32, p[1] as f32];
         let machines = self
             .machines
