@@ -64,6 +64,14 @@ pub struct Params {
     /// after `lockstep_wait_s`), and tag cmd_vel with the state's stamp. Implies sim time.
     pub lockstep: bool,
     pub lockstep_wait_s: f64,
+    /// Real time on the wall clock: act on each new state as soon as own data and every
+    /// expected entity of its stamp are in (or after `state_wait_s`), instead of at the
+    /// control timer's phase; the timer then only repeats the last command while no new
+    /// state comes (a heartbeat). A command computed at the timer's phase could use peer
+    /// poses of two different states and reach the bridge after its next step
+    /// (docs/adr/0024-act-on-state.md).
+    pub act_on_state: bool,
+    pub state_wait_s: f64,
     /// Also print the counters as one JSON object per line on stdout (every stats period
     /// and on exit, with `"final": true`), for benchmarks and launchers.
     pub stats_json: bool,
@@ -113,6 +121,8 @@ impl Default for Params {
             storage_half: [0.15, 0.08],
             lockstep: false,
             lockstep_wait_s: 0.5,
+            act_on_state: true,
+            state_wait_s: 0.03,
             stats_json: false,
             robots: Vec::new(),
             startup_timeout_s: 10.0,
@@ -137,6 +147,7 @@ parameters: policy (path), controller (greedy|greedy-orca|policy), shield (false
             room_margin (0.25), stats_period_s (10), discovery_period_s (0.5),
             robot_radius (0.08), machine_half_x/_y (0.12), storage_half_x (0.15), storage_half_y (0.08),
             lockstep (false; implies use_sim_time), lockstep_wait_s (0.5),
+            act_on_state (true: real time acts when a state is in), state_wait_s (0.03),
             stats_json (false; counters as JSON lines on stdout),
             robots (multi-robot mode: robot_0,robot_1,... or robot_0..N-1 in one process),
             startup_timeout_s (10), stall_timeout_s (10): watchdog, exit code 75 when
@@ -211,6 +222,8 @@ fn apply_param(p: &mut Params, name: &str, v: &ParamValue) -> Result<bool, ArgEr
         "storage_half_y" => p.storage_half[1] = positive(name, v)?,
         "lockstep_wait_s" => p.lockstep_wait_s = positive(name, v)?,
         "lockstep" => p.lockstep = boolean(name, v)?,
+        "act_on_state" => p.act_on_state = boolean(name, v)?,
+        "state_wait_s" => p.state_wait_s = positive(name, v)?,
         "discovery_period_s" => p.discovery_period_s = positive(name, v)?,
         "robots" => p.robots = parse_robots(name, v)?,
         "startup_timeout_s" => p.startup_timeout_s = timeout_s(name, v)?,

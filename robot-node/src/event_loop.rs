@@ -19,7 +19,9 @@ use ros::subscription;
 
 use crate::args::Params;
 use crate::fanout;
-use crate::hosted::{host, lockstep_step, print_stats_json, tick_now, Hosted};
+use crate::hosted::{
+    heartbeat, hold, host, lockstep_step, print_stats_json, state_step, tick_now, Hosted,
+};
 use crate::node::{retry, RobotSpec};
 use crate::readers::{drain, Readers, Sub, SubKind};
 use crate::watchdog::{NodeStage, Watchdog};
@@ -30,6 +32,16 @@ const CLOCK_TOKEN: Token = Token(usize::MAX - 1);
 /// Readers are drained when their mio event fires, when a drain stopped at its bound, and
 /// all of them at this period (a safety net: a missed wake-up costs at most this long).
 const SWEEP_PERIOD: Duration = Duration::from_millis(100);
+
+/// Start-up (not lockstep): the world settles once every hosted robot has its own pose,
+/// every discovered entity has sent data and no discovery scan added a topic for this
+/// long; scans run at this period until then. Robots of a 20-robot fleet got their own
+/// pose 0.05-0.4 s before they had discovered the machines, and acted blind to them
+/// (docs/adr/0024-act-on-state.md).
+const SETTLE_QUIET: Duration = Duration::from_millis(200);
+/// ... or this long after every own pose arrived, whatever is still missing (a removed
+/// robot's topics can stay discovered without data).
+const SETTLE_MAX: Duration = Duration::from_secs(2);
 
 pub(crate) fn run(
     p: &Params,
@@ -48,11 +60,15 @@ pub(crate) fn run(
         let t = l.now_s();
         l.drain(t);
         l.discover();
+        l.settle();
         if p.lockstep {
             l.lockstep();
         } else if l.clock_sub.is_some() {
             l.tick_sim_time();
         } else {
+            if p.act_on_state {
+                l.act_on_states();
+            }
             l.tick_wall_clock();
         }
         l.stats();
@@ -75,7 +91,9 @@ struct EventLoop<'a> {
     clock_sub: Option<Subscription<Clock>>,
     t0: Instant,
     period: Duration,
-    lockstep_wait: Duration,
+    /// How long a state is waited for to be complete: `lockstep_wait_s` in lockstep,
+    /// `state_wait_s` in real time with `act_on_state`.
+    state_wait: Duration,
     stats_period: Duration,
     next_discovery: Instant,
     next_sweep: Instant,
@@ -83,6 +101,12 @@ struct EventLoop<'a> {
     /// Sim time: last tick index = floor(t * rate), and the last clock value.
     sim_last_index: Option<i64>,
     sim_last_t: f64,
+    /// Start-up: the world is complete enough to act on (always in lockstep, which has
+    /// its own completeness rule), when every own pose had arrived, and when a discovery
+    /// scan last added a topic.
+    settled: bool,
+    own_seen_at: Option<Instant>,
+    last_new_topic_at: Instant,
 }
 
 impl<'a> EventLoop<'a> {
@@ -116,13 +140,20 @@ impl<'a> EventLoop<'a> {
             clock_sub: None,
             t0,
             period: Duration::from_secs_f64(1.0 / p.control_rate_hz),
-            lockstep_wait: Duration::from_secs_f64(p.lockstep_wait_s),
+            state_wait: Duration::from_secs_f64(if p.lockstep {
+                p.lockstep_wait_s
+            } else {
+                p.state_wait_s
+            }),
             stats_period,
             next_discovery: t0,
             next_sweep: t0,
             next_stats: t0 + stats_period,
             sim_last_index: None,
             sim_last_t: f64::NEG_INFINITY,
+            settled: p.lockstep,
+            own_seen_at: None,
+            last_new_topic_at: t0,
         };
         wd.stage(NodeStage::Subscriptions);
         l.subscribe_own(stop)?;
@@ -230,7 +261,7 @@ impl<'a> EventLoop<'a> {
                 deadline = deadline.min(h.next_tick);
             }
             if let Some((_, since)) = h.pending {
-                deadline = deadline.min(since + self.lockstep_wait);
+                deadline = deadline.min(since + self.state_wait);
             }
         }
         let timeout = if self.readers.leftover.is_empty() {
@@ -276,7 +307,13 @@ impl<'a> EventLoop<'a> {
         if now < self.next_discovery {
             return;
         }
-        self.next_discovery = now + Duration::from_secs_f64(self.p.discovery_period_s);
+        let period = Duration::from_secs_f64(self.p.discovery_period_s);
+        self.next_discovery = now
+            + if self.settled {
+                period
+            } else {
+                period.min(Duration::from_millis(100))
+            };
         for d in self.ctx.discovered_topics() {
             let Some(topic) = topics::parse_topic(&d.name) else {
                 continue;
@@ -303,6 +340,7 @@ impl<'a> EventLoop<'a> {
                     fanout::touch(self.hosted.iter_mut().map(|h| &mut h.brain), &topic);
                     // a new reader may hold samples before its first event is seen
                     self.readers.leftover.push(self.readers.subs.len() - 1);
+                    self.last_new_topic_at = Instant::now();
                     info!("discovered {}", topic.ros_name());
                 }
                 Err(e) => {
@@ -330,7 +368,56 @@ impl<'a> EventLoop<'a> {
         }
         for h in self.hosted.iter_mut() {
             let now = self.t0.elapsed().as_secs_f64();
-            lockstep_step(h, &self.log, self.lockstep_wait, now);
+            lockstep_step(h, &self.log, self.state_wait, now);
+        }
+    }
+
+    /// Start-up: settle the world (see [`SETTLE_QUIET`]) before any robot acts on it.
+    fn settle(&mut self) {
+        if self.settled
+            || self
+                .hosted
+                .iter()
+                .any(|h| h.brain.world.own_pose_stamp().is_none())
+        {
+            return;
+        }
+        let since = *self.own_seen_at.get_or_insert_with(Instant::now);
+        let missing: usize = self
+            .hosted
+            .iter()
+            .map(|h| h.brain.world.entities_without_data())
+            .sum();
+        let quiet = self.last_new_topic_at.elapsed() >= SETTLE_QUIET;
+        if (quiet && missing == 0) || since.elapsed() >= SETTLE_MAX {
+            self.settled = true;
+            let (m, s, r) = self.hosted[0].brain.world.known();
+            let msg = format!(
+                "inputs settled {:.2} s after start: {m} machines, {s} storages, {r} peers \
+                 known{}",
+                self.t0.elapsed().as_secs_f64(),
+                if missing > 0 {
+                    format!(" ({missing} without data yet)")
+                } else {
+                    String::new()
+                }
+            );
+            rosout!(self.log, LogLevel::Info, "{msg}");
+        }
+    }
+
+    /// Real time with `act_on_state`: act on each new state once it is in; the control
+    /// timer of a robot that acted restarts, so it only fires while no state comes.
+    fn act_on_states(&mut self) {
+        if !self.settled {
+            return;
+        }
+        let now = self.t0.elapsed().as_secs_f64();
+        for h in self.hosted.iter_mut() {
+            if state_step(h, &self.log, self.state_wait, now) {
+                // half a period of slack for the bridge's jitter before a repeat
+                h.next_tick = Instant::now() + self.period.mul_f64(1.5);
+            }
         }
     }
 
@@ -383,7 +470,9 @@ impl<'a> EventLoop<'a> {
                 h.brain.reset();
             }
             h.brain.counters.ticks_missed += skipped;
-            if due {
+            if due && !self.settled {
+                hold(h);
+            } else if due {
                 tick_now(h, &self.log, now);
             }
         }
@@ -410,7 +499,14 @@ impl<'a> EventLoop<'a> {
             if h.next_tick < now {
                 h.next_tick = now + period; // overrun: skip, do not burst
             }
-            tick_now(h, &self.log, self.t0.elapsed().as_secs_f64());
+            let t = self.t0.elapsed().as_secs_f64();
+            if !self.settled {
+                hold(h);
+            } else if self.p.act_on_state {
+                heartbeat(h, &self.log, t);
+            } else {
+                tick_now(h, &self.log, t);
+            }
         }
     }
 

@@ -129,6 +129,71 @@ pub(crate) fn tick_now(h: &mut Hosted, log: &NodeLoggingHandle, now: f64) {
     log_outcome(h, log, &r, "controlling");
 }
 
+/// Real time with `act_on_state`: act once `h`'s own data and every expected entity of
+/// a new state are in (or after `wait`, on the newest data then); true when it acted.
+/// The same completeness rule as lockstep, but the bridge does not wait for the command.
+pub(crate) fn state_step(
+    h: &mut Hosted,
+    log: &NodeLoggingHandle,
+    wait: Duration,
+    now: f64,
+) -> bool {
+    let Some(s) = h.brain.world.own_pose_stamp() else {
+        return false;
+    };
+    let last = h.brain.last_stamp();
+    if last.is_some_and(|l| s < l) {
+        info!("{}state stamps went back: resetting controller", h.tag);
+        h.brain.reset();
+        h.pending = None;
+    }
+    let last = h.brain.last_stamp();
+    if last.is_some_and(|l| s <= l) {
+        return false;
+    }
+    let since = match h.pending {
+        Some((ps, since)) if ps == s => since,
+        _ => {
+            let now = Instant::now();
+            h.pending = Some((s, now));
+            now
+        }
+    };
+    // the previous state acted on tells which entities to expect (None: all fresh ones)
+    let missing = h.brain.world.lockstep_missing(s, last, now);
+    if missing != Some(0) && since.elapsed() < wait {
+        return false;
+    }
+    if missing != Some(0) {
+        h.brain.counters.state_wait_timeouts += 1;
+    }
+    let (r, stamp) = h.brain.act_now(now);
+    h.publish(r.velocity, stamp);
+    h.pending = None;
+    log_outcome(h, log, &r, "controlling");
+    true
+}
+
+/// Start-up, before the world settled: a zero command without a state stamp (the bridge's
+/// start-up gate keeps waiting for this robot).
+pub(crate) fn hold(h: &mut Hosted) {
+    h.brain.counters.ticks += 1;
+    h.brain.counters.zero_discovering += 1;
+    h.publish([0.0, 0.0], None);
+}
+
+/// Real time with `act_on_state`, at the control timer: a heartbeat. Repeats the last
+/// command while a new state is awaited or none came; acts on the newest data only when
+/// there is no command to repeat (before the first state, or after own inputs were lost).
+pub(crate) fn heartbeat(h: &mut Hosted, log: &NodeLoggingHandle, now: f64) {
+    let (r, stamp) = match h.brain.repeat_last(now) {
+        Some(r) => r,
+        None => h.brain.act_now(now),
+    };
+    h.publish(r.velocity, stamp);
+    log_outcome(h, log, &r, "controlling");
+}
+
 /// Lockstep: act once `h`'s own data and every expected entity of the newest state are in
 /// (or after `wait`).
 pub(crate) fn lockstep_step(h: &mut Hosted, log: &NodeLoggingHandle, wait: Duration, now: f64) {

@@ -78,18 +78,43 @@ impl Brain {
     /// `commands` and `repeated_commands`).
     pub fn tick_once_per_state(&mut self, now: f64) -> (TickResult, Option<i64>) {
         let stamp = self.world.own_pose_stamp();
-        if let (Some(s), Some((last, v))) = (stamp, self.last_command) {
-            if s == last && self.world.own_inputs(now).is_ok() {
-                self.counters.ticks += 1;
-                self.counters.commands += 1;
-                self.counters.repeated_commands += 1;
-                let r = TickResult {
-                    velocity: v,
-                    outcome: Outcome::Command,
-                    counts: None,
-                };
-                return (r, Some(s));
+        if stamp.is_some() && stamp == self.last_stamp() {
+            if let Some(r) = self.repeat_last(now) {
+                return r;
             }
+        }
+        self.act_now(now)
+    }
+
+    /// The stamp of the state the last command answers (real time).
+    pub fn last_stamp(&self) -> Option<i64> {
+        self.last_command.map(|(s, _)| s)
+    }
+
+    /// Real time: the last command again, while the robot's own inputs are fresh (counted
+    /// in `ticks`, `commands` and `repeated_commands`); None when there is none to repeat.
+    pub fn repeat_last(&mut self, now: f64) -> Option<(TickResult, Option<i64>)> {
+        let (s, v) = self.last_command?;
+        self.world.own_inputs(now).ok()?;
+        self.counters.ticks += 1;
+        self.counters.commands += 1;
+        self.counters.repeated_commands += 1;
+        let r = TickResult {
+            velocity: v,
+            outcome: Outcome::Command,
+            counts: None,
+        };
+        Some((r, Some(s)))
+    }
+
+    /// Real time: act on the newest data now, and the stamp of the own pose the command
+    /// answers (None when it was not computed from state).
+    pub fn act_now(&mut self, now: f64) -> (TickResult, Option<i64>) {
+        let stamp = self.world.own_pose_stamp();
+        if let Some(s) = stamp {
+            let (n, off) = self.world.peers_off_stamp(s, now);
+            self.counters.peer_poses_used += n as u64;
+            self.counters.peer_poses_off_stamp += off as u64;
         }
         let r = self.tick(now);
         let stamp = match r.outcome {

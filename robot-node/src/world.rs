@@ -92,7 +92,14 @@ pub struct Counters {
     /// Realtime: ticks that found no new state and sent the last command again (counted
     /// in `ticks` and `commands` too).
     pub repeated_commands: u64,
+    /// Realtime: peer poses in the observations acted on, and how many of them were of
+    /// another state (stamp) than the robot's own pose.
+    pub peer_poses_used: u64,
+    pub peer_poses_off_stamp: u64,
     pub zero_own_stale: u64,
+    /// Zero commands sent at start-up while topic discovery was still adding inputs
+    /// (the node's world settles first, docs/adr/0024-act-on-state.md).
+    pub zero_discovering: u64,
     pub zero_obs_invalid: u64,
     pub zero_controller_error: u64,
     pub zero_bad_output: u64,
@@ -100,6 +107,9 @@ pub struct Counters {
     pub subscriptions: u64,
     /// Lockstep: states acted on before every expected entity of that stamp was in.
     pub lockstep_wait_timeouts: u64,
+    /// Real time (`act_on_state`): states acted on after `state_wait_s` with some expected
+    /// entity of that stamp still missing (its older sample was used).
+    pub state_wait_timeouts: u64,
     /// Control periods missed: wall clock, a tick that ran more than one period after its
     /// scheduled time (each whole period of lateness is one missed, skipped tick); sim time,
     /// tick indices skipped between two `/clock` updates. Not counted in lockstep.
@@ -140,13 +150,17 @@ impl Counters {
         self.ticks += o.ticks;
         self.commands += o.commands;
         self.repeated_commands += o.repeated_commands;
+        self.peer_poses_used += o.peer_poses_used;
+        self.peer_poses_off_stamp += o.peer_poses_off_stamp;
         self.zero_own_stale += o.zero_own_stale;
+        self.zero_discovering += o.zero_discovering;
         self.zero_obs_invalid += o.zero_obs_invalid;
         self.zero_controller_error += o.zero_controller_error;
         self.zero_bad_output += o.zero_bad_output;
         self.publish_errors += o.publish_errors;
         self.subscriptions += o.subscriptions;
         self.lockstep_wait_timeouts += o.lockstep_wait_timeouts;
+        self.state_wait_timeouts += o.state_wait_timeouts;
         self.ticks_missed += o.ticks_missed;
         self.tick_late_max_us = self.tick_late_max_us.max(o.tick_late_max_us);
     }
@@ -166,8 +180,11 @@ impl Counters {
             "ticks": self.ticks,
             "commands": self.commands,
             "repeated_commands": self.repeated_commands,
+            "peer_poses_used": self.peer_poses_used,
+            "peer_poses_off_stamp": self.peer_poses_off_stamp,
             "zero": {
                 "own_stale": self.zero_own_stale,
+                "discovering": self.zero_discovering,
                 "obs_invalid": self.zero_obs_invalid,
                 "controller_error": self.zero_controller_error,
                 "bad_output": self.zero_bad_output,
@@ -175,6 +192,7 @@ impl Counters {
             "publish_errors": self.publish_errors,
             "subscriptions": self.subscriptions,
             "lockstep_wait_timeouts": self.lockstep_wait_timeouts,
+            "state_wait_timeouts": self.state_wait_timeouts,
             "ticks_missed": self.ticks_missed,
             "tick_late_max_us": self.tick_late_max_us,
         })
@@ -186,8 +204,9 @@ impl std::fmt::Display for Counters {
         write!(
             f,
             "accepted={} dropped(decode={} non_finite={} out_of_room={} unexpected={} \
-             foreign_writer={}) writer_changes={} ticks={} commands={} zero(own_stale={} obs_invalid={} controller_error={} bad_output={}) \
-             publish_errors={} subscriptions={} lockstep_wait_timeouts={} \
+             foreign_writer={}) writer_changes={} ticks={} commands={} repeated_commands={} \
+             peer_poses(used={} off_stamp={}) zero(own_stale={} discovering={} obs_invalid={} controller_error={} bad_output={}) \
+             publish_errors={} subscriptions={} lockstep_wait_timeouts={} state_wait_timeouts={} \
              ticks_missed={} tick_late_max_us={}",
             self.accepted,
             self.dropped_decode,
@@ -198,13 +217,18 @@ impl std::fmt::Display for Counters {
             self.writer_changes,
             self.ticks,
             self.commands,
+            self.repeated_commands,
+            self.peer_poses_used,
+            self.peer_poses_off_stamp,
             self.zero_own_stale,
+            self.zero_discovering,
             self.zero_obs_invalid,
             self.zero_controller_error,
             self.zero_bad_output,
             self.publish_errors,
             self.subscriptions,
             self.lockstep_wait_timeouts,
+            self.state_wait_timeouts,
             self.ticks_missed,
             self.tick_late_max_us
         )
@@ -469,6 +493,15 @@ impl World {
         self.slot(entity);
     }
 
+    /// Known entities (subscribed to) with no sample yet of a topic they need: a pose, and
+    /// for machines and peers a flag. Right after start-up, the world is not complete
+    /// until this is 0.
+    pub fn entities_without_data(&self) -> usize {
+        self.each_entity()
+            .filter(|(e, needs_flag)| e.pose.is_none() || (*needs_flag && e.flag.is_none()))
+            .count()
+    }
+
     /// Stamp of the latest own pose (lockstep: the simulator state this robot is at).
     pub fn own_pose_stamp(&self) -> Option<i64> {
         self.own.pose.and_then(|p| p.stamp)
@@ -550,6 +583,17 @@ impl World {
                 .filter_map(|r| Some((f(at(&r.pose)?.value), flag_at(&r.flag)?.value)))
                 .collect(),
         })
+    }
+
+    /// Fresh peer poses at `now`, and how many carry another stamp than `stamp`.
+    pub fn peers_off_stamp(&self, stamp: i64, now: f64) -> (usize, usize) {
+        let rt = self.cfg.stale_timeout_s;
+        self.peers
+            .values()
+            .filter_map(|r| r.pose.filter(|p| rt <= 0.0 || now - p.at <= rt))
+            .fold((0, 0), |(n, off), p| {
+                (n + 1, off + usize::from(p.stamp != Some(stamp)))
+            })
     }
 
     /// Known (ever seen) entity counts: machines, storages, peers.

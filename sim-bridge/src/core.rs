@@ -43,6 +43,14 @@ pub struct BridgeCounters {
     pub lockstep_timeouts: u64,
     pub commands_ok: u64,
     pub commands_failed: u64,
+    /// Realtime: robot-steps by the age of the state the applied command answers, in
+    /// steps: 0 = the state being stepped (what lockstep always has), 1 = the one before,
+    /// 2, and 3 or more. Commands without a stamp are not counted. How far real time
+    /// lags behind the observations its commands were computed from (RESULTS 7.11).
+    pub cmd_age_0: u64,
+    pub cmd_age_1: u64,
+    pub cmd_age_2: u64,
+    pub cmd_age_3plus: u64,
 }
 
 /// How old (sim seconds) the state a robot's latest command answers may be for the robot
@@ -288,6 +296,8 @@ impl Core {
             self.counters.lockstep_timeouts += 1;
         }
         let key = self.published.as_ref().map(|p| p.0);
+        let now_key = self.stamp_key();
+        let dt_us = (self.env.config().world.dt as f64 * 1e6).max(1.0);
         let cmds: Vec<[f32; 2]> = self
             .env
             .robot_ids()
@@ -300,6 +310,18 @@ impl Core {
                         .last_cmd_at
                         .is_some_and(|t| now - t <= self.p.stale_timeout_s),
                 };
+                if ok && self.p.mode == Mode::Realtime {
+                    if let Some(k) = s.cmd_stamp {
+                        let age = ((now_key - k) as f64 / dt_us).round().max(0.0) as u64;
+                        let c = &mut self.counters;
+                        *match age {
+                            0 => &mut c.cmd_age_0,
+                            1 => &mut c.cmd_age_1,
+                            2 => &mut c.cmd_age_2,
+                            _ => &mut c.cmd_age_3plus,
+                        } += 1;
+                    }
+                }
                 if ok {
                     s.cmd
                 } else {
