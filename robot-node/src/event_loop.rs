@@ -34,8 +34,9 @@ const CLOCK_TOKEN: Token = Token(usize::MAX - 1);
 const SWEEP_PERIOD: Duration = Duration::from_millis(100);
 
 /// Start-up (not lockstep): the world settles once every hosted robot has its own pose,
-/// every discovered entity has sent data and no discovery scan added a topic for this
-/// long; scans run at this period until then. Robots of a 20-robot fleet got their own
+/// every discovered entity has sent data and, for this long since both the last new
+/// topic and the last own pose to arrive, no discovery scan added a topic (scans run
+/// every 100 ms until then). Robots of a 20-robot fleet got their own
 /// pose 0.05-0.4 s before they had discovered the machines, and acted blind to them
 /// (docs/adr/0024-act-on-state.md).
 const SETTLE_QUIET: Duration = Duration::from_millis(200);
@@ -388,7 +389,9 @@ impl<'a> EventLoop<'a> {
             .iter()
             .map(|h| h.brain.world.entities_without_data())
             .sum();
-        let quiet = self.last_new_topic_at.elapsed() >= SETTLE_QUIET;
+        // quiet since the last new topic and since every own pose was in: scans run every
+        // 100 ms until settled, so two of them saw nothing new
+        let quiet = self.last_new_topic_at.max(since).elapsed() >= SETTLE_QUIET;
         if (quiet && missing == 0) || since.elapsed() >= SETTLE_MAX {
             self.settled = true;
             let (m, s, r) = self.hosted[0].brain.world.known();

@@ -182,3 +182,39 @@ fn recorded_fleet_bag_matches_the_final_metrics() {
     }
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// Real time: no robot acts before its inputs settled (ADR 0024). Its first command is
+/// computed with every machine, storage and peer of the setup known; before the settle
+/// rule, robots of a 20-robot fleet acted with no machine known yet and drove into them.
+#[test]
+fn realtime_robots_first_act_with_every_entity_known() {
+    let domain = (std::process::id() % 40) as u16 + 100;
+    let logs = std::env::temp_dir().join(format!("tending-settle-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&logs);
+    let out = Command::new(tending())
+        .args(["fleet", "--setup", "6.4_2", "--duration", "6", "--no-stdin"])
+        .args(["--domain", &domain.to_string()])
+        .arg("--log-dir")
+        .arg(&logs)
+        .output()
+        .unwrap();
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success(),
+        "fleet failed: {}\n{stdout}",
+        out.status
+    );
+    for i in 0..6 {
+        let log = std::fs::read_to_string(logs.join(format!("robot_{i}.log"))).unwrap();
+        let first = log
+            .lines()
+            .find(|l| l.contains("controlling: observation counts"))
+            .unwrap_or_else(|| panic!("robot_{i} never acted:\n{log}"));
+        assert!(
+            first.contains("machines: 4, storages: 2, peers: 5"),
+            "robot_{i} first acted on an incomplete world: {first}"
+        );
+        assert!(log.contains("inputs settled"), "robot_{i}:\n{log}");
+    }
+    let _ = std::fs::remove_dir_all(&logs);
+}
