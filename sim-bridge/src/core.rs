@@ -179,6 +179,12 @@ impl Core {
             self.counters.cmds_dropped_non_finite += 1;
             return CmdOutcome::DroppedNonFinite;
         }
+        // A command not computed from state carries its publisher's wall clock as source
+        // timestamp (robot_node's zeros before it has state, any stock ROS 2 publisher):
+        // far beyond sim time, so a stamp later than the current state answers none.
+        // Counting those as answers released the start-up gate (ADR 0022) while robots
+        // were still sending zeros, and kept such robots in `robots_on_state`.
+        let stamp = stamp.filter(|&s| s <= self.stamp_key());
         let v = [t.linear.x as f32, t.linear.y as f32];
         if !(v[0].is_finite() && v[1].is_finite()) {
             self.counters.cmds_dropped_non_finite += 1;

@@ -3,6 +3,9 @@
 
 use super::*;
 
+/// A wall-clock source timestamp key (2026-12-02, microseconds since the epoch).
+const WALL_CLOCK_US: i64 = 1_796_200_000_000_000;
+
 fn core(mode: Mode) -> Core {
     let p = BridgeParams {
         mode,
@@ -94,6 +97,12 @@ fn robots_on_state_counts_commands_answering_recent_state_only() {
     // robot_0 acts on state, robot_1 only sends unstamped zeros (never got its pose)
     c.on_cmd("robot_0", &Twist::planar(0.5, 0.0), Some(k0), 0.0);
     c.on_cmd("robot_1", &Twist::planar(0.0, 0.0), None, 0.0);
+    c.on_cmd(
+        "robot_2",
+        &Twist::planar(0.0, 0.0),
+        Some(WALL_CLOCK_US),
+        0.0,
+    );
     assert_eq!(c.metrics().robots_on_state, 1);
     // 20 steps (2 s of sim time) later robot_0's answer is too old
     for i in 0..20 {
@@ -148,6 +157,15 @@ fn the_realtime_start_waits_for_commands_from_state_from_initial_robots_only() {
     let k0 = c.stamp_key();
     // an unstamped command (robot_node before it has state) does not count
     c.on_cmd("robot_0", &Twist::planar(0.0, 0.0), None, 0.1);
+    assert_eq!(c.initial_robots_waiting().len(), 6);
+    // nor one that carries its publisher's wall clock, which is what an unstamped command
+    // is on the wire (DDS source timestamp; 2026 in microseconds)
+    c.on_cmd(
+        "robot_0",
+        &Twist::planar(0.0, 0.0),
+        Some(WALL_CLOCK_US),
+        0.1,
+    );
     assert_eq!(c.initial_robots_waiting().len(), 6);
     for i in 0..5 {
         c.on_cmd(
