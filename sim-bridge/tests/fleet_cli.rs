@@ -218,3 +218,95 @@ fn realtime_robots_first_act_with_every_entity_known() {
     }
     let _ = std::fs::remove_dir_all(&logs);
 }
+
+/// Robot positions by (stamp in ms, robot index) from a recorded bag.
+fn recorded_poses(
+    dir: &std::path::Path,
+    robots: usize,
+) -> std::collections::BTreeMap<(i64, usize), (f64, f64)> {
+    let r = bag::BagReader::open(dir).unwrap();
+    let mut m = std::collections::BTreeMap::new();
+    for i in 0..robots {
+        let poses = r
+            .decode_topic::<msgs::PoseStamped>(&format!("/robot_{i}/pose"))
+            .unwrap();
+        for (_, p) in poses {
+            let ms = p.header.stamp.sec as i64 * 1000 + p.header.stamp.nanosec as i64 / 1_000_000;
+            m.insert((ms, i), (p.pose.position.x, p.pose.position.y));
+        }
+    }
+    m
+}
+
+/// Real time acts on each whole state and its commands reach the bridge before the next
+/// step (ADR 0024), so a realtime run is the lockstep run, which is the offline episode:
+/// the same position for every robot at every step both recorded. Only a late command
+/// (the bridge's `cmd_age_1`+) or a state acted on before it was whole may break that,
+/// and then most commands must still answer the stepped state.
+#[test]
+fn realtime_fleet_moves_robots_as_lockstep_does() {
+    let domain = (std::process::id() % 40) as u16 + 60;
+    let base = std::env::temp_dir().join(format!("tending-rt-vs-ls-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&base);
+    let run = |mode: &str, secs: &str| {
+        let dir = base.join(mode);
+        let out = Command::new(tending())
+            .args([
+                "fleet",
+                "--setup",
+                "6.4_2",
+                "--duration",
+                secs,
+                "--no-stdin",
+            ])
+            .args(["--mode", mode, "--domain", &domain.to_string()])
+            .arg("--record")
+            .arg(&dir)
+            .arg("--log-dir")
+            .arg(base.join(format!("{mode}-logs")))
+            .output()
+            .unwrap();
+        let stdout = String::from_utf8_lossy(&out.stdout).to_string();
+        assert!(out.status.success(), "{mode} fleet failed:\n{stdout}");
+        (recorded_poses(&dir, 6), final_metrics(&stdout))
+    };
+    let (ls, _) = run("lockstep", "6");
+    let (rt, m) = run("realtime", "6");
+    let late: u64 = ["cmd_age_1", "cmd_age_2", "cmd_age_3plus"]
+        .iter()
+        .map(|k| m[k].as_u64().unwrap())
+        .sum();
+    let on_time = m["cmd_age_0"].as_u64().unwrap();
+    let waits: u64 = (0..6)
+        .map(|i| {
+            let log =
+                std::fs::read_to_string(base.join(format!("realtime-logs/robot_{i}.log"))).unwrap();
+            let last = log
+                .lines()
+                .rev()
+                .find(|l| l.contains("final counters"))
+                .unwrap();
+            let v = last.split("state_wait_timeouts=").nth(1).unwrap();
+            v.split_whitespace().next().unwrap().parse::<u64>().unwrap()
+        })
+        .sum();
+    let common: Vec<_> = rt.keys().filter(|k| ls.contains_key(k)).collect();
+    assert!(
+        common.len() >= 6 * 40,
+        "only {} common samples",
+        common.len()
+    );
+    let differ = common.iter().filter(|k| rt[k] != ls[k]).count();
+    if late == 0 && waits == 0 {
+        assert_eq!(
+            differ,
+            0,
+            "{differ} of {} positions differ: {m}",
+            common.len()
+        );
+    } else {
+        eprintln!("realtime run had {late} late commands and {waits} wait timeouts: not compared");
+        assert!(on_time >= 9 * late, "{on_time} on time, {late} late: {m}");
+    }
+    let _ = std::fs::remove_dir_all(&base);
+}
