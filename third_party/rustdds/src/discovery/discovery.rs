@@ -1108,6 +1108,7 @@ impl Discovery {
 
   fn process_participant_dispose(&mut self, participant_guidp: GuidPrefix) {
     discovery_db_write(&self.discovery_db).remove_participant(participant_guidp, true); // true = actively removed
+    #[cfg(feature = "security")]
     if let Some(security) = self.security_opt.as_mut() {
       security.forget_remote_participant(&participant_guidp);
     }
@@ -1779,6 +1780,7 @@ impl Discovery {
     let removed = discovery_db_write(&self.discovery_db).participant_cleanup();
     for (guid_prefix, reason) in removed {
       debug!("participant cleanup - timeout for {guid_prefix:?}");
+      #[cfg(feature = "security")]
       if let Some(security) = self.security_opt.as_mut() {
         security.forget_remote_participant(&guid_prefix);
       }

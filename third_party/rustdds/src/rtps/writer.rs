@@ -1913,6 +1913,7 @@ impl Writer {
       }
       // Keys not exchanged yet with a just-matched remote: expected at start-up, and
       // what is not sent now is repaired once the keys arrive.
+      #[cfg(feature = "security")]
       Err(e) if e.is_no_remote_endpoint_keys() => {
         debug!("Not sending to readers yet: {e:?}");
       }
