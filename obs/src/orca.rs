@@ -517,11 +517,15 @@ impl GreedyOrca {
         if p.detour && self.detour_left > 0 && d > stand_off {
             // the stand-off point is outside the target's grown box, so only other boxes
             // can be in the way
-            let goal = [q[0] * (d - stand_off) / d, q[1] * (d - stand_off) / d];
+            let goal = crate::detour::Goal {
+                point: [q[0] * (d - stand_off) / d, q[1] * (d - stand_off) / d],
+                target: (t.rel, t.half),
+                stand_off,
+            };
             let boxes: Vec<_> = observed_boxes(machines, storages, g).collect();
             let w =
                 crate::detour::waypoint(goal, &boxes, inner, r, ([own[0], own[1]], p.room_half));
-            if w != goal {
+            if w != goal.point {
                 let n = norm(w);
                 return [w[0] / n * k, w[1] / n * k];
             }
@@ -769,6 +773,30 @@ mod tests {
                 assert!(last < 1e-3, "detour off: {sideways:?}");
             }
         }
+    }
+
+    #[test]
+    fn a_carrier_below_a_gap_too_narrow_gets_to_its_storage() {
+        // 2.8_1, seed 0, episode 16 (examples/stuck_carriers.rs): the carrier stood at the
+        // mouth of a gap between two machines, narrower than two margins, for 180 steps.
+        // Driven by its own commands, it now reaches its stand-off at the storage.
+        let mut c = GreedyOrca::new(params()).unwrap();
+        let mut p = [0.175f32, -0.263];
+        let machines = [[0.390f32, -0.099], [-0.050, -0.136]];
+        let storage = [0.464f32, 0.546];
+        let dt = c.params.greedy.dt;
+        for _ in 0..60 {
+            let own = [p[0], p[1], 1.0];
+            let m: Vec<f32> = machines
+                .iter()
+                .flat_map(|q| [q[0] - p[0], q[1] - p[1], 0.0])
+                .collect();
+            let v = c.velocity(&own, &m, &[storage[0] - p[0], storage[1] - p[1]], &[]);
+            p = [p[0] + v[0] * dt, p[1] + v[1] * dt];
+        }
+        let half = c.params.greedy.storage_half;
+        let d = crate::geom::box_distance([storage[0] - p[0], storage[1] - p[1]], half, [0.0, 0.0]);
+        assert!(d < 0.14, "{d} m from the storage, at {p:?}");
     }
 
     #[test]

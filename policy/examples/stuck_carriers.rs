@@ -6,6 +6,7 @@
 //! Used for the planner's detour (obs::detour, docs/RESULTS.md 7.10).
 //!
 //! cargo run --release -p policy --features train --example stuck_carriers -- CHECKPOINT|greedy-orca SETUPS [EPISODES] [SEED]
+//! (`STUCK_VERBOSE=1`: print each stop's episode, robot, first step and position)
 
 use policy::train::eval::{run_episode_hooked, Controller};
 use sim::{ScenarioConfig, Setup};
@@ -21,6 +22,8 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     };
     let episodes: u64 = args.get(2).map_or(Ok(50), |s| s.parse())?;
     let seed: u64 = args.get(3).map_or(Ok(0), |s| s.parse())?;
+    // STUCK_VERBOSE=1: where and when each stop began
+    let verbose = std::env::var_os("STUCK_VERBOSE").is_some();
     let ctrl = Controller::script_or_filtered_checkpoint(ck)?;
     let cfg = ScenarioConfig::default();
     for s in setups.split(',') {
@@ -59,6 +62,31 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                             .fold(f32::INFINITY, f32::min);
                         if n + 1 >= MIN_STEPS && to_storage > AWAY_RADII * radius {
                             stuck_steps += 1;
+                            if n + 1 == MIN_STEPS && verbose {
+                                println!(
+                                    "  episode {ep}: robot {i} still since step {} at ({:.3}, {:.3})",
+                                    env.steps() - MIN_STEPS,
+                                    r.pos[0],
+                                    r.pos[1]
+                                );
+                                if std::env::var_os("STUCK_SCENE").is_some() {
+                                    for q in &robots {
+                                        println!(
+                                            "    robot at ({:.3}, {:.3}) part {}",
+                                            q.pos[0], q.pos[1], q.has_part
+                                        );
+                                    }
+                                    for m in env.machines() {
+                                        println!("    machine at ({:.3}, {:.3}) half ({:.3}, {:.3}) ready {}", m.centre[0], m.centre[1], m.half[0], m.half[1], m.part_ready);
+                                    }
+                                    for (c, h) in &storages {
+                                        println!(
+                                            "    storage at ({:.3}, {:.3}) half ({:.3}, {:.3})",
+                                            c[0], c[1], h[0], h[1]
+                                        );
+                                    }
+                                }
+                            }
                         }
                     }
                 },
