@@ -14,13 +14,13 @@
 //! grown box lengthened paths that ORCA's slide along a face handles well (-3 % parts).
 //!
 //! [`waypoint`] gives the point to head for instead: the goal when the straight segment
-//! misses every box (grown by the robot's obstacle margin), else the corner of the first
-//! box in the way with the shortest path robot -> corner -> goal, skipping corners inside
-//! another grown box or out of the room, so a gap too narrow to pass is not taken. It is
-//! stateless: once past the corner, the line to the goal clears and the robot heads
-//! straight for it. A visibility-graph search over every box would find whole paths; one
-//! corner at a time, recomputed every step, is what this needs: rooms of a few boxes per
-//! robot's neighbourhood, with no walls of boxes to get lost in.
+//! misses every box (grown by the robot's obstacle margin), else the farthest point in
+//! straight sight along a shortest grid path (A*) to a reachable stand-off point of the
+//! target (docs/adr/0025-detour-by-grid-path.md). The first version went for one box
+//! corner at a time; it sent robots into gaps their margin closes and at stand-off points
+//! inside another box's margin, where they stayed for the rest of the episode. A grid of
+//! half-radius cells over a room of a few metres is a few thousand cells, searched only on
+//! detour steps.
 
 use crate::geom::box_distance;
 
