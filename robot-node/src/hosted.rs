@@ -129,6 +129,18 @@ pub(crate) fn tick_now(h: &mut Hosted, log: &NodeLoggingHandle, now: f64) {
     log_outcome(h, log, &r, "controlling");
 }
 
+/// Since when `h` has been waiting for state `s` to be whole (now, if `s` is new).
+fn pending_since(h: &mut Hosted, s: i64) -> Instant {
+    match h.pending {
+        Some((ps, since)) if ps == s => since,
+        _ => {
+            let now = Instant::now();
+            h.pending = Some((s, now));
+            now
+        }
+    }
+}
+
 /// Real time with `act_on_state`: act once `h`'s own data and every expected entity of
 /// a new state are in (or after `wait`, on the newest data then); true when it acted.
 /// The same completeness rule as lockstep, but the bridge does not wait for the command.
@@ -151,14 +163,7 @@ pub(crate) fn state_step(
     if last.is_some_and(|l| s <= l) {
         return false;
     }
-    let since = match h.pending {
-        Some((ps, since)) if ps == s => since,
-        _ => {
-            let now = Instant::now();
-            h.pending = Some((s, now));
-            now
-        }
-    };
+    let since = pending_since(h, s);
     // the previous state acted on tells which entities to expect (None: all fresh ones)
     let missing = h.brain.world.lockstep_missing(s, last, now);
     if missing != Some(0) && since.elapsed() < wait {
@@ -209,14 +214,7 @@ pub(crate) fn lockstep_step(h: &mut Hosted, log: &NodeLoggingHandle, wait: Durat
     if h.last_acted.is_some_and(|l| s <= l) {
         return;
     }
-    let since = match h.pending {
-        Some((ps, since)) if ps == s => since,
-        _ => {
-            let now = Instant::now();
-            h.pending = Some((s, now));
-            now
-        }
-    };
+    let since = pending_since(h, s);
     let missing = h.brain.world.lockstep_missing(s, h.last_acted, now);
     let timed_out = since.elapsed() >= wait;
     if missing == Some(0) || timed_out {
