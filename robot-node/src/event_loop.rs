@@ -416,8 +416,11 @@ impl<'a> EventLoop<'a> {
             return;
         }
         let now = self.t0.elapsed().as_secs_f64();
+        // three quarters of a period: the bridge's states at the control rate all count,
+        // jitter included; a faster pose stream is thinned to the control rate
+        let min_gap_us = (0.75e6 / self.p.control_rate_hz) as i64;
         for h in self.hosted.iter_mut() {
-            if state_step(h, &self.log, self.state_wait, now) {
+            if state_step(h, &self.log, self.state_wait, min_gap_us, now) {
                 // half a period of slack for the bridge's jitter before a repeat
                 h.next_tick = Instant::now() + self.period.mul_f64(1.5);
             }

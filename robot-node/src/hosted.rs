@@ -144,10 +144,14 @@ fn pending_since(h: &mut Hosted, s: i64) -> Instant {
 /// Real time with `act_on_state`: act once `h`'s own data and every expected entity of
 /// a new state are in (or after `wait`, on the newest data then); true when it acted.
 /// The same completeness rule as lockstep, but the bridge does not wait for the command.
+/// A state stamped less than `min_gap_us` after the last one acted on is skipped: the
+/// controller runs at most at the control rate however fast poses come (a localization
+/// stream at 20-100 Hz), since its velocity estimates assume one period between states.
 pub(crate) fn state_step(
     h: &mut Hosted,
     log: &NodeLoggingHandle,
     wait: Duration,
+    min_gap_us: i64,
     now: f64,
 ) -> bool {
     let Some(s) = h.brain.world.own_pose_stamp() else {
@@ -160,7 +164,7 @@ pub(crate) fn state_step(
         h.pending = None;
     }
     let last = h.brain.last_stamp();
-    if last.is_some_and(|l| s <= l) {
+    if last.is_some_and(|l| s - l < min_gap_us.max(1)) {
         return false;
     }
     let since = pending_since(h, s);
