@@ -20,6 +20,25 @@ fn tending() -> PathBuf {
     p
 }
 
+/// `tending fleet ARGS... --no-stdin --domain DOMAIN`; asserts it exited 0 and returns
+/// its stdout.
+fn run_fleet(args: &[&std::ffi::OsStr], domain: u16) -> String {
+    let out = Command::new(tending())
+        .arg("fleet")
+        .args(args)
+        .args(["--no-stdin", "--domain", &domain.to_string()])
+        .output()
+        .unwrap();
+    let stdout = String::from_utf8_lossy(&out.stdout).to_string();
+    assert!(
+        out.status.success(),
+        "fleet {args:?} failed: {}\n{stdout}\n{}",
+        out.status,
+        String::from_utf8_lossy(&out.stderr)
+    );
+    stdout
+}
+
 fn final_metrics(stdout: &str) -> serde_json::Value {
     let line = stdout
         .lines()
@@ -122,26 +141,16 @@ fn recorded_fleet_bag_matches_the_final_metrics() {
     let domain = (std::process::id() % 50) as u16 + 50;
     let dir = std::env::temp_dir().join(format!("tending-rec-{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&dir);
-    let out = Command::new(tending())
-        .args([
-            "fleet",
-            "--setup",
-            "4.4_2",
-            "--duration",
-            "10",
-            "--no-stdin",
-        ])
-        .args(["--domain", &domain.to_string()])
-        .arg("--record")
-        .arg(&dir)
-        .output()
-        .unwrap();
-    let stdout = String::from_utf8_lossy(&out.stdout);
-    assert!(
-        out.status.success(),
-        "fleet failed: {}\n{stdout}\n{}",
-        out.status,
-        String::from_utf8_lossy(&out.stderr)
+    let stdout = run_fleet(
+        &[
+            "--setup".as_ref(),
+            "4.4_2".as_ref(),
+            "--duration".as_ref(),
+            "10".as_ref(),
+            "--record".as_ref(),
+            dir.as_os_str(),
+        ],
+        domain,
     );
     let m = final_metrics(&stdout);
     let parts = m["parts_delivered"].as_u64().unwrap();
@@ -191,18 +200,16 @@ fn realtime_robots_first_act_with_every_entity_known() {
     let domain = (std::process::id() % 40) as u16 + 100;
     let logs = std::env::temp_dir().join(format!("tending-settle-{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&logs);
-    let out = Command::new(tending())
-        .args(["fleet", "--setup", "6.4_2", "--duration", "6", "--no-stdin"])
-        .args(["--domain", &domain.to_string()])
-        .arg("--log-dir")
-        .arg(&logs)
-        .output()
-        .unwrap();
-    let stdout = String::from_utf8_lossy(&out.stdout);
-    assert!(
-        out.status.success(),
-        "fleet failed: {}\n{stdout}",
-        out.status
+    run_fleet(
+        &[
+            "--setup".as_ref(),
+            "6.4_2".as_ref(),
+            "--duration".as_ref(),
+            "6".as_ref(),
+            "--log-dir".as_ref(),
+            logs.as_os_str(),
+        ],
+        domain,
     );
     for i in 0..6 {
         let log = std::fs::read_to_string(logs.join(format!("robot_{i}.log"))).unwrap();
@@ -250,24 +257,22 @@ fn realtime_fleet_moves_robots_as_lockstep_does() {
     let _ = std::fs::remove_dir_all(&base);
     let run = |mode: &str, secs: &str| {
         let dir = base.join(mode);
-        let out = Command::new(tending())
-            .args([
-                "fleet",
-                "--setup",
-                "6.4_2",
-                "--duration",
-                secs,
-                "--no-stdin",
-            ])
-            .args(["--mode", mode, "--domain", &domain.to_string()])
-            .arg("--record")
-            .arg(&dir)
-            .arg("--log-dir")
-            .arg(base.join(format!("{mode}-logs")))
-            .output()
-            .unwrap();
-        let stdout = String::from_utf8_lossy(&out.stdout).to_string();
-        assert!(out.status.success(), "{mode} fleet failed:\n{stdout}");
+        let logs = base.join(format!("{mode}-logs"));
+        let stdout = run_fleet(
+            &[
+                "--setup".as_ref(),
+                "6.4_2".as_ref(),
+                "--duration".as_ref(),
+                secs.as_ref(),
+                "--mode".as_ref(),
+                mode.as_ref(),
+                "--record".as_ref(),
+                dir.as_os_str(),
+                "--log-dir".as_ref(),
+                logs.as_os_str(),
+            ],
+            domain,
+        );
         (recorded_poses(&dir, 6), final_metrics(&stdout))
     };
     let (ls, _) = run("lockstep", "6");
