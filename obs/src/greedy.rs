@@ -18,6 +18,9 @@ pub struct GreedyParams {
     pub k_speed: f32,
     /// Control period, s.
     pub dt: f32,
+    /// Steps a machine takes to make a part after its last was picked
+    /// ([`crate::machine_clock`]).
+    pub prep_steps: u32,
 }
 
 impl Default for GreedyParams {
@@ -30,6 +33,7 @@ impl Default for GreedyParams {
             storage_half: [0.15, 0.08],
             k_speed: 0.5,
             dt: 0.1,
+            prep_steps: 20,
         }
     }
 }

@@ -18,6 +18,7 @@ pub mod detour;
 mod flat;
 pub mod geom;
 pub mod greedy;
+pub mod machine_clock;
 pub mod orca;
 pub mod shield;
 pub mod storage_queue;

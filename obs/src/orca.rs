@@ -14,6 +14,7 @@
 
 use crate::geom::{nearest_on_box, norm};
 use crate::greedy::{greedy_target, GreedyParams, Target};
+use crate::machine_clock::MachineClock;
 use crate::storage_queue::StorageMemory;
 use crate::targets;
 use dodgy_2d::{Agent, AvoidanceOptions, Obstacle, Vec2};
@@ -246,6 +247,8 @@ pub struct GreedyOrca {
     stuck_steps: u32,
     /// Steps left going around a box ([`crate::detour`]) after being stuck.
     detour_left: u32,
+    /// When each machine will have a part, for the "matched" entry (kept by the planner).
+    clock: MachineClock,
 }
 
 /// Stuck: this many steps in a row below a tenth of K_speed while the preferred velocity
@@ -267,6 +270,7 @@ impl GreedyOrca {
     pub fn new(params: OrcaParams) -> Result<Self, String> {
         params.validate()?;
         Ok(Self {
+            clock: MachineClock::new(params.greedy.prep_steps),
             params,
             prev_own: None,
             prev_peers: Vec::new(),
@@ -291,6 +295,7 @@ impl GreedyOrca {
         self.planned_from = None;
         self.stuck_steps = 0;
         self.detour_left = 0;
+        self.clock.reset();
     }
 
     /// Velocity command (vx, vy), m/s, for one observation row (layout of `ObsBatch`):
@@ -354,6 +359,7 @@ impl GreedyOrca {
         storages: &[f32],
         peers: &[f32],
     ) -> [f32; 2] {
+        self.clock.update(own, machines, crate::MACHINE_DIM);
         let t = targets::target_kept(
             action,
             own,
@@ -362,6 +368,7 @@ impl GreedyOrca {
             peers,
             &self.params.greedy,
             &mut self.storage_memory,
+            self.clock.ready_in(),
         );
         let pref = self.preferred_or_make_room(t, own, machines, storages);
         self.note_progress(own, machines, storages, pref);

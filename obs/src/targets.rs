@@ -30,9 +30,10 @@ pub fn menu_size_ok(n: usize) -> bool {
     n == N_TARGET_ACTIONS || n == N_TARGET_ACTIONS_V1
 }
 
-/// What a busy machine costs in [`matched_machine`], in control steps on top of the
-/// travel: half the default preparation time (20 steps), the expected wait at a machine
-/// whose pick was seen at a random moment. A nearer busy machine can so beat a farther
+/// What a busy machine whose timer the robot does not know costs in [`matched_machine`],
+/// in control steps on top of the travel: half the default preparation time (20 steps),
+/// the expected wait at a machine whose pick was seen at a random moment. A machine the
+/// robot has timed ([`crate::machine_clock`]) costs its steps until ready instead. A nearer busy machine can so beat a farther
 /// ready one. Screened without retraining (seed 7, 20 episodes, the 7-entry bundled
 /// policy with "nearest busy" replaced by the matching): with 10 steps 6.4_2 35.1 ->
 /// 36.2 parts, 42.28_14 255.3 -> 263.9; ready machines strictly first (busy ones only
@@ -117,7 +118,7 @@ pub fn target(
     p: &GreedyParams,
 ) -> Option<Target> {
     let mut fresh = StorageMemory::default();
-    target_kept(a, own, machines, storages, peers, p, &mut fresh)
+    target_kept(a, own, machines, storages, peers, p, &mut fresh, &[])
 }
 
 /// [`target`] for a robot that remembers its storage choice between decisions
@@ -131,6 +132,7 @@ pub fn target_kept(
     peers: &[f32],
     p: &GreedyParams,
     memory: &mut StorageMemory,
+    ready_in: &[Option<u32>],
 ) -> Option<Target> {
     use TargetAction::*;
     let action = TargetAction::from_index(a);
@@ -177,7 +179,7 @@ pub fn target_kept(
         Matched if storages_crowded(storages, peers) => {
             greedy_target(own, machines, storages, peers, p)
         }
-        Matched => matched_machine(own, machines, peers, p).map(|i| Target {
+        Matched => matched_machine(own, machines, peers, p, ready_in).map(|i| Target {
             rel: [machines[i * MACHINE_DIM], machines[i * MACHINE_DIM + 1]],
             half: p.machine_half,
         }),
@@ -207,8 +209,13 @@ fn storages_crowded(storages: &[f32], peers: &[f32]) -> bool {
 /// None when it carries a part or every machine went to a robot that is closer in cost.
 ///
 /// Robots: this one and every part-less peer it observes. Cost of robot r at machine m:
-/// travel steps at K_speed from r to m's centre, plus [`MATCH_BUSY_STEPS`] when m has no
-/// ready part. Pairs are taken in increasing cost, each robot and machine at most once
+/// travel steps at K_speed from r to m's centre, plus the steps until m has a part:
+/// `ready_in[m]` ([`crate::machine_clock`]; empty = none known), [`MATCH_BUSY_STEPS`]
+/// for a busy machine of unknown timer. Travel plus wait rather than the later of the
+/// two: on the 28-setup screen (seed 7 x 20 episodes, the bundled policy) the sum gained
+/// 1.3 % over the constant wait (2.8_1 +13 %, 5.10_2 +9 %), the later of the two 1.0 %,
+/// the wait weighted 0.75x-2x the same within 0.1 %, and counting a machine ready by
+/// the robot's arrival as ready lost 0.4 %. docs/RESULTS.md 7.13. Pairs are taken in increasing cost, each robot and machine at most once
 /// (ties in observation order, this robot first). Every robot observes the same fleet, so
 /// robots compute the same matching up to rounding and go to different machines with no
 /// messages between them. Greedy rather than optimal (Hungarian): it is what the claim
@@ -219,6 +226,7 @@ pub fn matched_machine(
     machines: &[f32],
     peers: &[f32],
     p: &GreedyParams,
+    ready_in: &[Option<u32>],
 ) -> Option<usize> {
     if own[2] > 0.5 {
         return None;
@@ -238,8 +246,15 @@ pub fn matched_machine(
         n_robots += 1;
         for (j, m) in machines.chunks_exact(MACHINE_DIM).enumerate() {
             let (dx, dy) = (m[0] - pos[0], m[1] - pos[1]);
-            let busy = if m[2] > 0.5 { 0.0 } else { MATCH_BUSY_STEPS };
-            pairs.push(((dx * dx + dy * dy).sqrt() / step + busy, r as u32, j as u32));
+            // Steps until the machine has a part: 0 when ready, the clock's count when
+            // known, else MATCH_BUSY_STEPS.
+            let wait = match (m[2] > 0.5, ready_in.get(j).copied().flatten()) {
+                (true, _) => 0.0,
+                (false, Some(t)) => t as f32,
+                (false, None) => MATCH_BUSY_STEPS,
+            };
+            let cost = (dx * dx + dy * dy).sqrt() / step + wait;
+            pairs.push((cost, r as u32, j as u32));
         }
     }
     // Stable: equal costs keep generation order (this robot first, machines in order).
@@ -390,22 +405,28 @@ mod tests {
         let own = [0.0, 0.0, 0.0];
         // Two ready machines, right (0.5 m) and left (0.6 m). Alone: the nearer one.
         let two_ready = [0.5, 0.0, 1.0, -0.6, 0.0, 1.0];
-        assert_eq!(matched_machine(&own, &two_ready, &[], &p), Some(0));
+        assert_eq!(matched_machine(&own, &two_ready, &[], &p, &[]), Some(0));
         // A free peer right next to the right machine takes it: this robot gets the left
         // one, where the claim rule would only have said "claimed".
         let peer_right = [0.45, 0.0, 0.0];
-        assert_eq!(matched_machine(&own, &two_ready, &peer_right, &p), Some(1));
+        assert_eq!(
+            matched_machine(&own, &two_ready, &peer_right, &p, &[]),
+            Some(1)
+        );
         // A peer carrying a part is not matched.
         let loaded_right = [0.45, 0.0, 1.0];
         assert_eq!(
-            matched_machine(&own, &two_ready, &loaded_right, &p),
+            matched_machine(&own, &two_ready, &loaded_right, &p, &[]),
             Some(0)
         );
         // Two free peers nearer to both machines: nothing left for this robot.
         let two_peers = [0.45, 0.0, 0.0, -0.55, 0.0, 0.0];
-        assert_eq!(matched_machine(&own, &two_ready, &two_peers, &p), None);
+        assert_eq!(matched_machine(&own, &two_ready, &two_peers, &p, &[]), None);
         // Carrying a part: no machine; the menu entry then names the nearest storage.
-        assert_eq!(matched_machine(&[0.0, 0.0, 1.0], &two_ready, &[], &p), None);
+        assert_eq!(
+            matched_machine(&[0.0, 0.0, 1.0], &two_ready, &[], &p, &[]),
+            None
+        );
         assert_eq!(
             target(7, &[0.0, 0.0, 1.0], &two_ready, &STORAGES, &[], &p).map(|t| t.rel),
             Some([0.0, -0.4])
@@ -413,9 +434,21 @@ mod tests {
         // A busy machine costs MATCH_BUSY_STEPS (0.5 m here): a busy one at 0.2 m loses to
         // a ready one at 0.6 m, a busy one at 0.05 m wins.
         let busy_near = [0.2, 0.0, 0.0, -0.6, 0.0, 1.0];
-        assert_eq!(matched_machine(&own, &busy_near, &[], &p), Some(1));
+        assert_eq!(matched_machine(&own, &busy_near, &[], &p, &[]), Some(1));
         let busy_nearer = [0.05, 0.0, 0.0, -0.6, 0.0, 1.0];
-        assert_eq!(matched_machine(&own, &busy_nearer, &[], &p), Some(0));
+        assert_eq!(matched_machine(&own, &busy_nearer, &[], &p, &[]), Some(0));
+        // A timed busy machine costs its steps until ready (0.05 m per step here): at 0.2 m
+        // (4 steps) with 3 steps left it beats the ready one at 0.6 m (12 steps), with 9
+        // left it loses.
+        let soon = [Some(3), Some(0)];
+        assert_eq!(matched_machine(&own, &busy_near, &[], &p, &soon), Some(0));
+        let late = [Some(9), Some(0)];
+        assert_eq!(matched_machine(&own, &busy_near, &[], &p, &late), Some(1));
+        // Unknown timer: MATCH_BUSY_STEPS again.
+        assert_eq!(
+            matched_machine(&own, &busy_near, &[], &p, &[None, Some(0)]),
+            Some(1)
+        );
         // Through the menu: entry 7 names the matched box; a 7-entry policy never asks.
         assert_eq!(
             target(7, &own, &two_ready, &STORAGES, &peer_right, &p).map(|t| t.rel),
@@ -466,7 +499,7 @@ mod tests {
                 .filter(|&(k, _)| k != i)
                 .flat_map(|(_, q)| [q[0] - me[0], q[1] - me[1], 0.0])
                 .collect();
-            got.push(matched_machine(&own, &rel_m, &rel_p, &p).unwrap());
+            got.push(matched_machine(&own, &rel_m, &rel_p, &p, &[]).unwrap());
         }
         got.sort_unstable();
         assert_eq!(got, vec![0, 1, 2]);

@@ -43,6 +43,9 @@ pub struct Params {
     pub use_sim_time: bool,
     /// Speed of one discrete action, m/s.
     pub k_speed: f64,
+    /// Control periods a machine takes to make a part after a pick (the simulator's
+    /// `task.prep_steps`): the planner times machines from their ready flag with it.
+    pub prep_steps: u32,
     /// No sample from a robot (own or peer) for this long: stale.
     pub stale_timeout_s: f64,
     /// Staleness of machine and storage data (latched topics); <= 0 disables it.
@@ -111,6 +114,7 @@ impl Default for Params {
             control_rate_hz: 10.0,
             use_sim_time: false,
             k_speed: 0.5,
+            prep_steps: 20,
             stale_timeout_s: 1.0,
             static_stale_timeout_s: 1.0,
             room_margin: msgs::validate::DEFAULT_MARGIN,
@@ -143,7 +147,7 @@ pub const USAGE: &str = "usage: robot_node [--ros-args -r __ns:=/robot_N [-r __n
 parameters: policy (path), controller (greedy|greedy-orca|policy), shield (false), orca_filter (true unless shield:=true), orca_clearance (0.04 m at full speed), orca_rest_clearance (0.03 m at rest),
             control_rate_hz (10),
             use_sim_time (false), reach (= robot_radius),
-            k_speed (0.5), stale_timeout_s (1.0), static_stale_timeout_s (= stale_timeout_s, <=0 off),
+            k_speed (0.5), prep_steps (20), stale_timeout_s (1.0), static_stale_timeout_s (= stale_timeout_s, <=0 off),
             room_margin (0.25), stats_period_s (10), discovery_period_s (0.5),
             robot_radius (0.08), machine_half_x/_y (0.12), storage_half_x (0.15), storage_half_y (0.08),
             lockstep (false; implies use_sim_time), lockstep_wait_s (0.5),
@@ -205,6 +209,7 @@ fn apply_param(p: &mut Params, name: &str, v: &ParamValue) -> Result<bool, ArgEr
         "control_rate_hz" => p.control_rate_hz = rate_hz(name, v)?,
         "use_sim_time" => p.use_sim_time = boolean(name, v)?,
         "k_speed" => p.k_speed = positive(name, v)?,
+        "prep_steps" => p.prep_steps = steps(name, v)?,
         "stale_timeout_s" => p.stale_timeout_s = positive(name, v)?,
         "static_stale_timeout_s" => {
             let x = num(name, v)?;
@@ -232,6 +237,19 @@ fn apply_param(p: &mut Params, name: &str, v: &ParamValue) -> Result<bool, ArgEr
         _ => return Ok(false),
     }
     Ok(true)
+}
+
+/// A whole number of control periods, 1 to 100,000.
+fn steps(name: &str, v: &ParamValue) -> Result<u32, ArgError> {
+    let x = num(name, v)?;
+    if x.fract() == 0.0 && (1.0..=100_000.0).contains(&x) {
+        Ok(x as u32)
+    } else {
+        Err(param_error(
+            name,
+            format!("must be a whole number of steps from 1 to 100000, got {x}"),
+        ))
+    }
 }
 
 /// `robot_0,robot_3` or the range form `robot_0..5` (= robot_0 .. robot_5).

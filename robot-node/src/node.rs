@@ -103,6 +103,7 @@ pub fn greedy_params(p: &Params) -> GreedyParams {
         storage_half: [p.storage_half[0] as f32, p.storage_half[1] as f32],
         k_speed: p.k_speed as f32,
         dt: (1.0 / p.control_rate_hz) as f32,
+        prep_steps: p.prep_steps,
     }
 }
 

@@ -30,6 +30,7 @@ pub fn greedy_params(sizes: &Sizes, cfg: &ScenarioConfig) -> GreedyParams {
         storage_half: sizes.storage_half,
         k_speed: cfg.task.k_speed,
         dt: cfg.world.dt,
+        prep_steps: cfg.task.prep_steps,
     }
 }
 

@@ -193,6 +193,7 @@ impl Plan {
         let s = &self.sizes;
         c.args(["-p", &format!("control_rate_hz:={}", self.a.rate_hz)])
             .args(["-p", &format!("k_speed:={}", f(self.cfg.task.k_speed))])
+            .args(["-p", &format!("prep_steps:={}", self.cfg.task.prep_steps)])
             .args(["-p", &format!("robot_radius:={}", f(s.robot_radius))])
             .args(["-p", &format!("machine_half_x:={}", f(s.machine_half[0]))])
             .args(["-p", &format!("machine_half_y:={}", f(s.machine_half[1]))])
