@@ -367,8 +367,10 @@ impl GreedyOrca {
             storages,
             peers,
             &self.params.greedy,
-            &mut self.storage_memory,
-            self.clock.ready_in(),
+            targets::PlannerMemory {
+                storage: &mut self.storage_memory,
+                ready_in: self.clock.ready_in(),
+            },
         );
         let pref = self.preferred_or_make_room(t, own, machines, storages);
         self.note_progress(own, machines, storages, pref);

@@ -118,7 +118,19 @@ pub fn target(
     p: &GreedyParams,
 ) -> Option<Target> {
     let mut fresh = StorageMemory::default();
-    target_kept(a, own, machines, storages, peers, p, &mut fresh, &[])
+    let memory = PlannerMemory {
+        storage: &mut fresh,
+        ready_in: &[],
+    };
+    target_kept(a, own, machines, storages, peers, p, memory)
+}
+
+/// What a planner remembers between decisions, for [`target_kept`].
+pub struct PlannerMemory<'a> {
+    /// The storage a carrier chose ([`crate::storage_queue`]).
+    pub storage: &'a mut StorageMemory,
+    /// Steps until each machine has a part ([`crate::machine_clock`]); empty: none known.
+    pub ready_in: &'a [Option<u32>],
 }
 
 /// [`target`] for a robot that remembers its storage choice between decisions
@@ -131,10 +143,13 @@ pub fn target_kept(
     storages: &[f32],
     peers: &[f32],
     p: &GreedyParams,
-    memory: &mut StorageMemory,
-    ready_in: &[Option<u32>],
+    memory: PlannerMemory,
 ) -> Option<Target> {
     use TargetAction::*;
+    let PlannerMemory {
+        storage: memory,
+        ready_in,
+    } = memory;
     let action = TargetAction::from_index(a);
     if !(own[2] > 0.5 && action == Some(Matched)) {
         memory.clear();
