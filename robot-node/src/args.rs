@@ -374,7 +374,10 @@ mod tests {
             "k_speed:=0.25",
             "-p",
             "stale_timeout_s:=2",
+            "-p",
+            "prep_steps:=30",
         ]);
+        assert_eq!(p.prep_steps, 30);
         assert_eq!(p.node.namespace, "/robot_3");
         assert_eq!(p.robot_id(), "robot_3");
         assert_eq!(p.node.node_name, "brain");
@@ -477,6 +480,8 @@ mod tests {
             (&["--ros-args", "-p", "k_speed"], "k_speed"),
             (&["--ros-args", "-p", "k_speed:=fast"], "k_speed"),
             (&["--ros-args", "-p", "k_speed:=-1"], "k_speed"),
+            (&["--ros-args", "-p", "prep_steps:=2.5"], "prep_steps"),
+            (&["--ros-args", "-p", "prep_steps:=0"], "prep_steps"),
             (
                 &["--ros-args", "-p", "control_rate_hz:=0"],
                 "control_rate_hz",
