@@ -10,7 +10,10 @@
 //! - `en-route`: part-less robots exist, all of them farther than that (travel);
 //! - `none-free`: every robot carries a part.
 //!
-//! Also: parts picked but still carried at the end (`stranded`).
+//! Also: parts picked but still carried at the end (`stranded`), and for `en-route` steps
+//! whether the matching (`obs::targets::matched_machine`, timed by the simulator's own
+//! timers, which the planner's clock equals offline) sends a part-less robot to j, and
+//! how many steps away that robot is (docs/RESULTS.md 7.13).
 //!
 //! cargo run --release -p policy --features train --example machine_waits -- CHECKPOINT|greedy-orca SETUP [EPISODES] [SEED]
 
@@ -32,6 +35,9 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let (mut parts, mut stranded, mut machine_steps) = (0u64, 0u64, 0u64);
     let mut idle_steps = 0u64;
     let mut robot_steps = 0u64;
+    // en-route steps with a robot matched to the machine, and that robot's distance in steps
+    let (mut heading, mut heading_steps) = (0u64, 0.0f64);
+    let mut batch = obs::ObsBatch::default();
     for ep in 0..episodes {
         let mut picked_once: Vec<bool> = Vec::new();
         let mut last_ready: Vec<bool> = Vec::new();
@@ -47,6 +53,24 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                 let near = sizes.robot_radius + sizes.reach + cfg.task.k_speed * cfg.world.dt;
                 let machines: Vec<_> = env.machines().collect();
                 let robots: Vec<_> = env.robots().collect();
+                let step = cfg.task.k_speed * cfg.world.dt;
+                let params = sim::baselines::greedy_params(sizes, &cfg);
+                env.observe(&mut batch);
+                let ready_in: Vec<Option<u32>> = machines
+                    .iter()
+                    .map(|m| Some(if m.part_ready { 0 } else { m.timer }))
+                    .collect();
+                let matched: Vec<Option<usize>> = (0..robots.len())
+                    .map(|i| {
+                        obs::targets::matched_machine(
+                            batch.own_row(i),
+                            batch.machines_row(i),
+                            batch.peers_row(i),
+                            &params,
+                            &ready_in,
+                        )
+                    })
+                    .collect();
                 if picked_once.is_empty() {
                     picked_once = vec![false; machines.len()];
                     last_ready = vec![true; machines.len()];
@@ -72,6 +96,12 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                         2
                     };
                     waits[class] += 1;
+                    let to_j = (0..robots.len()).find(|&i| matched[i] == Some(j));
+                    if let Some(i) = to_j.filter(|_| class == 2) {
+                        heading += 1;
+                        heading_steps += (obs::geom::box_distance(m.centre, m.half, robots[i].pos)
+                            / step) as f64;
+                    }
                 }
                 final_carried = robots.iter().filter(|r| r.has_part).count() as u64;
                 idle_steps += robots.iter().filter(|r| !r.has_part).count() as u64;
@@ -97,6 +127,11 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         waits[2] as f64 / m,
         waits[3] as f64 / m,
         machine_steps as f64 / m
+    );
+    println!(
+        "  en-route steps with a part-less robot matched to the machine: {:.1} % of them, that robot {:.1} steps from the box on average",
+        100.0 * heading as f64 / waits[2].max(1) as f64,
+        heading_steps / heading.max(1) as f64
     );
     Ok(())
 }
