@@ -476,6 +476,28 @@ mod tests {
     }
 
     #[test]
+    fn matching_minimizes_the_summed_cost() {
+        let p = params();
+        let own = [0.0, 0.0, 0.0];
+        // A peer 1.0 m right; ready machines 0.9 m and 2.2 m right. Taking the cheapest pair
+        // first (the peer to 0.9 m) would send this robot 2.2 m (total 2.3 m); the optimal
+        // assignment sends it 0.9 m and the peer 1.2 m (total 2.1 m).
+        let machines = [0.9, 0.0, 1.0, 2.2, 0.0, 1.0];
+        let peer = [1.0, 0.0, 0.0];
+        assert_eq!(matched_machine(&own, &machines, &peer, &p, &[]), Some(0));
+        // Seen from the peer (this robot 1.0 m left of it) the matching is the same.
+        let from_peer = [-0.1, 0.0, 1.0, 1.2, 0.0, 1.0];
+        assert_eq!(
+            matched_machine(&own, &from_peer, &[-1.0, 0.0, 0.0], &p, &[]),
+            Some(1)
+        );
+        // More robots than machines: the one left out gets None.
+        let one = [0.9, 0.0, 1.0];
+        assert_eq!(matched_machine(&own, &one, &peer, &p, &[]), None);
+        assert_eq!(matched_machine(&own, &[], &peer, &p, &[]), None);
+    }
+
+    #[test]
     fn crowded_storages_turn_the_matching_into_greedy() {
         let p = params();
         let own = [0.0, 0.0, 0.0];
