@@ -160,6 +160,12 @@ pub fn fleet_lockstep_in(
     let s = env0.sizes();
     let f = |x: f32| format!("{:?}", x as f64);
     let mut kids = Kill(Vec::new());
+    // Robot logs go to files, printed when a robot went missing or the bridge timed out
+    // waiting (a rare failure under load had nothing else to go on).
+    let logs =
+        std::env::temp_dir().join(format!("tending-lockstep-{}-{domain}", std::process::id()));
+    std::fs::create_dir_all(&logs).unwrap();
+    let log_of = |i: usize| logs.join(format!("robot_{i}.log"));
     for i in 0..setup.robots {
         let mut cmd = Command::new(robot_node_bin());
         cmd.env("ROS_DOMAIN_ID", domain.to_string())
@@ -173,7 +179,7 @@ pub fn fleet_lockstep_in(
             .args(["-p", "stale_timeout_s:=5.0"])
             .args(["--disable-rosout-logs"])
             .stdout(Stdio::null())
-            .stderr(Stdio::null());
+            .stderr(std::fs::File::create(log_of(i)).unwrap());
         if let Some(p) = policy {
             cmd.args(["-p", &format!("policy:={}", p.display())]);
         }
@@ -228,6 +234,18 @@ pub fn fleet_lockstep_in(
     let status = bridge.wait().unwrap();
     assert!(status.success(), "sim_bridge exited with {status}");
     drop(kids);
+    let troubled = last
+        .as_ref()
+        .is_some_and(|m| m["despawned"] != 0 || m["lockstep_timeouts"] != 0);
+    for i in (0..setup.robots).filter(|_| troubled) {
+        let text = std::fs::read_to_string(log_of(i)).unwrap_or_default();
+        let tail: Vec<&str> = text.lines().rev().take(15).collect();
+        eprintln!("--- robot_{i} log, last {} lines:", tail.len());
+        for l in tail.iter().rev() {
+            eprintln!("{l}");
+        }
+    }
+    let _ = std::fs::remove_dir_all(&logs);
     last.expect("no metrics line from sim_bridge")
 }
 
