@@ -35,8 +35,8 @@ pub fn menu_size_ok(n: usize) -> bool {
 /// What a busy machine whose timer the robot does not know costs in [`matched_machine`],
 /// in control steps on top of the travel: half the default preparation time (20 steps),
 /// the expected wait at a machine whose pick was seen at a random moment. A machine the
-/// robot has timed ([`crate::machine_clock`]) costs its steps until ready instead. A nearer busy machine can so beat a farther
-/// ready one. Screened without retraining (seed 7, 20 episodes, the 7-entry bundled
+/// robot has timed ([`crate::machine_clock`]) costs its steps until ready instead. A
+/// nearer busy machine can so beat a farther ready one. Screened without retraining (seed 7, 20 episodes, the 7-entry bundled
 /// policy with "nearest busy" replaced by the matching): with 10 steps 6.4_2 35.1 ->
 /// 36.2 parts, 42.28_14 255.3 -> 263.9; ready machines strictly first (busy ones only
 /// by distance after every ready one) gave 35.9 / 263.6, 20 steps 35.9 / 263.8.
@@ -136,8 +136,9 @@ pub struct PlannerMemory<'a> {
 }
 
 /// [`target`] for a robot that remembers its storage choice between decisions
-/// ([`crate::storage_queue::SWITCH_STEPS`]): the planner's path. `memory` is cleared on
-/// every entry but "matched" with a part.
+/// ([`crate::storage_queue::SWITCH_STEPS`]) and when each machine will be ready
+/// ([`crate::machine_clock`]): the planner's path. The storage memory is cleared on every
+/// entry but "matched" with a part.
 pub fn target_kept(
     a: u8,
     own: &[f32],
