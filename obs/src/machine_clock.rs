@@ -79,6 +79,21 @@ impl MachineClock {
 
     /// Steps until machine `j` (observation index at the last [`Self::update`]) has a part
     /// ready: 0 when ready now, None when not known.
+    /// Count `n` steps that passed unobserved (a real-time robot that missed states), before
+    /// the next [`Self::update`]. A busy machine's count goes down by `n`; one that ran out
+    /// meanwhile made its part, which the flag still being down at the next update says
+    /// was picked at once (as [`Self::update`] reads it), so the count restarts from the
+    /// preparation time for the steps left over. A flag that fell while unobserved is seen
+    /// falling at the next update, as if it fell then: up to `n` steps later than it did.
+    pub fn skip(&mut self, n: u32) {
+        let prep = self.prep_steps.max(1);
+        for s in &mut self.seen {
+            if let Seen::Busy(t) = *s {
+                *s = Seen::Busy(if t > n { t - n } else { prep - (n - t) % prep });
+            }
+        }
+    }
+
     pub fn ready_in(&self) -> &[Option<u32>] {
         &self.ready_in
     }
@@ -137,6 +152,33 @@ mod tests {
         for want in [3, 2, 1, 3, 2] {
             c.update(&[0.0, 0.0, 0.0], &row(&[false]), 3);
             assert_eq!(c.ready_in(), &[Some(want)]);
+        }
+    }
+
+    #[test]
+    fn skipped_steps_count_down_as_observed_ones_do() {
+        // a clock that sees every step, and one that misses some (across a restart, too)
+        let flags = [
+            true, false, false, false, false, false, false, false, false, false, false,
+        ];
+        for seen_by_some in [&[0, 1, 2, 5, 6, 10][..], &[0, 1, 2, 4, 9]] {
+            let (mut all, mut some) = (MachineClock::new(5), MachineClock::new(5));
+            let mut last = 0;
+            for (t, &f) in flags.iter().enumerate() {
+                all.update(&[0.0, 0.0, 0.0], &row(&[f]), 3);
+                if seen_by_some.contains(&t) {
+                    if t > last + 1 {
+                        some.skip((t - last - 1) as u32);
+                    }
+                    some.update(&[0.0, 0.0, 0.0], &row(&[f]), 3);
+                    assert_eq!(
+                        some.ready_in(),
+                        all.ready_in(),
+                        "step {t} of {seen_by_some:?}"
+                    );
+                    last = t;
+                }
+            }
         }
     }
 

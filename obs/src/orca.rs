@@ -337,6 +337,12 @@ impl GreedyOrca {
         }
     }
 
+    /// `n` control steps passed without a call (a real-time robot that missed states):
+    /// the machine clock counts them ([`MachineClock::skip`]).
+    pub fn skip_steps(&mut self, n: u32) {
+        self.clock.skip(n);
+    }
+
     /// Greedy's preferred velocity: [`Self::preferred_towards`] the [`greedy_target`] box.
     pub fn greedy_preferred(
         &self,

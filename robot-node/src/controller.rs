@@ -62,6 +62,10 @@ pub trait Controller: Send {
     /// Velocity command (vx, vy) in m/s, map frame.
     fn act(&mut self, obs: &ObsBatch) -> anyhow::Result<[f32; 2]>;
     fn name(&self) -> &'static str;
+    /// Real time: the state the next [`Self::act`] answers came `gap_s` seconds after the
+    /// one the last command answered (more than one control step when states were
+    /// missed). Only a controller that counts steps needs it.
+    fn state_gap(&mut self, _gap_s: f64) {}
 }
 
 /// Scripted baseline: [`obs::greedy::greedy_action`], the very function the simulator's
@@ -341,6 +345,16 @@ impl Controller for PolicyController {
     }
     fn name(&self) -> &'static str {
         "policy"
+    }
+    /// The planner's machine clock counts control steps ([`GreedyOrca::skip_steps`]): a
+    /// missed state would otherwise leave it a step behind until that machine's next pick.
+    fn state_gap(&mut self, gap_s: f64) {
+        if let Some(p) = &mut self.planner {
+            let steps = (gap_s / p.params().greedy.dt as f64).round();
+            if steps >= 2.0 && steps.is_finite() {
+                p.skip_steps((steps - 1.0).min(u32::MAX as f64) as u32);
+            }
+        }
     }
 }
 

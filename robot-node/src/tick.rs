@@ -111,6 +111,11 @@ impl Brain {
     /// answers (None when it was not computed from state).
     pub fn act_now(&mut self, now: f64) -> (TickResult, Option<i64>) {
         let stamp = self.world.own_pose_stamp();
+        if let (Some(s), Some(l)) = (stamp, self.last_stamp()) {
+            if s > l {
+                self.controller.state_gap((s - l) as f64 * 1e-6);
+            }
+        }
         if let Some(s) = stamp {
             let (n, off) = self.world.peers_off_stamp(s, now);
             self.counters.peer_poses_used += n as u64;
@@ -298,6 +303,42 @@ mod tests {
         assert_eq!((r.velocity, s), ([0.0, 0.0], None));
         assert!(matches!(r.outcome, Outcome::OwnStale(_)));
         assert_eq!((b.counters.ticks, b.counters.commands), (4, 3));
+    }
+
+    /// Records the state gaps it is told of.
+    struct Gaps(Arc<std::sync::Mutex<Vec<f64>>>);
+    impl Controller for Gaps {
+        fn reset(&mut self) {}
+        fn act(&mut self, _: &obs::ObsBatch) -> anyhow::Result<[f32; 2]> {
+            Ok([0.0, 0.0])
+        }
+        fn name(&self) -> &'static str {
+            "gaps"
+        }
+        fn state_gap(&mut self, gap_s: f64) {
+            self.0.lock().unwrap().push(gap_s);
+        }
+    }
+
+    #[test]
+    fn real_time_tells_the_controller_how_far_apart_states_were() {
+        let gaps = Arc::new(std::sync::Mutex::new(Vec::new()));
+        let mut b = Brain::new(world(), Box::new(Gaps(gaps.clone())), 0.5);
+        // states at 0.1, 0.2, then 0.5 (two missed); a repeat of 0.5 is no new state
+        for (stamp, at) in [(0.1, 0.1), (0.2, 0.2), (0.5, 0.5), (0.5, 0.55)] {
+            feed(&mut b.world, at);
+            let pose = PoseStamped::planar(Time::from_secs_f64(stamp), "map", -0.5, -0.5);
+            b.world
+                .on_pose(&robot("robot_0", Leaf::Pose), &pose, at)
+                .unwrap();
+            b.tick_once_per_state(at);
+        }
+        let gaps = gaps.lock().unwrap().clone();
+        assert_eq!(gaps.len(), 2, "{gaps:?}");
+        assert!(
+            (gaps[0] - 0.1).abs() < 1e-6 && (gaps[1] - 0.3).abs() < 1e-6,
+            "{gaps:?}"
+        );
     }
 
     #[test]
