@@ -15,7 +15,13 @@
 //! timers, which the planner's clock equals offline) sends a part-less robot to j, and
 //! how many steps away that robot is (docs/RESULTS.md 7.13).
 //!
+//! Also for `en-route` steps: whether some part-less robot was parked at another, busy
+//! machine, or left out of the matching altogether (a spare); and per machine cycle how
+//! often the robot matched to it changed (RESULTS 7.15).
+//!
 //! cargo run --release -p policy --features train --example machine_waits -- CHECKPOINT|greedy-orca SETUP [EPISODES] [SEED]
+//! (`TRACE=1`: each late cycle's matched robot and its distance in steps, step by step, `s`
+//! where it did not move; `SCENE=EPISODE,ROBOT,FROM,TO`: that robot's surroundings)
 
 use policy::train::eval::{run_episode_hooked, Controller};
 use sim::{ScenarioConfig, Setup};
@@ -34,14 +40,36 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let mut waits = [0u64; 4];
     let (mut parts, mut stranded, mut machine_steps) = (0u64, 0u64, 0u64);
     let mut idle_steps = 0u64;
+    // robot-steps carrying or matched away from every box, and those moving < 1/3 step
+    let (mut moving_steps, mut crawl_steps) = (0u64, 0u64);
     let mut robot_steps = 0u64;
     // en-route steps with a robot matched to the machine, and that robot's distance in steps
     let (mut heading, mut heading_steps) = (0u64, 0.0f64);
+    // en-route steps with a part-less robot parked at a busy machine (within `near` of it),
+    // the steps until that machine is ready summed, and with a part-less robot unmatched
+    let (mut parked, mut parked_wait, mut spare) = (0u64, 0.0f64, 0u64);
+    // per machine cycle (pick to the next robot in reach): how often the robot matched to
+    // it changed, split by whether a robot was in reach when the part became ready
+    let (mut on_time, mut late, mut switches_on_time, mut switches_late) = (0u64, 0u64, 0u64, 0u64);
     let mut batch = obs::ObsBatch::default();
+    let scene: Option<(u64, usize, u32, u32)> = std::env::var("SCENE").ok().and_then(|s| {
+        let v: Vec<u64> = s.split(',').filter_map(|x| x.parse().ok()).collect();
+        (v.len() == 4).then(|| (v[0], v[1] as usize, v[2] as u32, v[3] as u32))
+    });
     for ep in 0..episodes {
         let mut picked_once: Vec<bool> = Vec::new();
         let mut last_ready: Vec<bool> = Vec::new();
         let mut final_carried = 0u64;
+        // per machine: robot matched last step, switches since the last pick, late this cycle
+        let mut cycle: Vec<(Option<usize>, u64, bool)> = Vec::new();
+        // TRACE: per machine, this cycle's (matched robot, its steps away, has it a part)
+        let trace = std::env::var_os("TRACE").is_some();
+        let mut history: Vec<Vec<String>> = Vec::new();
+        let mut t = 0u32;
+        // last step's actions (TRACE) and positions, to mark robots asking for something
+        // other than "matched" and robots that did not move
+        let last_actions = std::cell::RefCell::new(Vec::<u8>::new());
+        let mut last_pos: Vec<[f32; 2]> = Vec::new();
         let m = run_episode_hooked(
             &ctrl,
             &cfg,
@@ -75,8 +103,108 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                     picked_once = vec![false; machines.len()];
                     last_ready = vec![true; machines.len()];
                 }
+                if cycle.is_empty() {
+                    cycle = vec![(None, 0, false); machines.len()];
+                    history = vec![Vec::new(); machines.len()];
+                }
+                t += 1;
+                // SCENE=ep,robot,from,to: that robot's surroundings step by step
+                if let Some((e, i, t0, t1)) = scene.filter(|s| s.0 == ep) {
+                    if (t0..=t1).contains(&t) {
+                        let r = &robots[i];
+                        let mut near_peers: Vec<(f32, usize)> = robots
+                            .iter()
+                            .enumerate()
+                            .filter(|&(k, _)| k != i)
+                            .map(|(k, q)| {
+                                (
+                                    obs::geom::norm([q.pos[0] - r.pos[0], q.pos[1] - r.pos[1]]),
+                                    k,
+                                )
+                            })
+                            .collect();
+                        near_peers.sort_by(|a, b| a.0.total_cmp(&b.0));
+                        let peers: Vec<String> = near_peers
+                            .iter()
+                            .take(4)
+                            .map(|(d, k)| {
+                                format!("r{k}{} {d:.3}", if robots[*k].has_part { "*" } else { "" })
+                            })
+                            .collect();
+                        let boxes: Vec<String> = machines
+                            .iter()
+                            .enumerate()
+                            .map(|(j, m)| (j, obs::geom::box_distance(m.centre, m.half, r.pos)))
+                            .filter(|(_, d)| *d < 0.3)
+                            .map(|(j, d)| {
+                                format!(
+                                    "m{j} {d:.3}{}",
+                                    if machines[j].part_ready { "R" } else { "" }
+                                )
+                            })
+                            .collect();
+                        println!(
+                            "ep {e} t {t} r{i}{} at ({:.3}, {:.3}) matched {:?} act {:?} | peers {} | machines {}",
+                            if r.has_part { "*" } else { "" },
+                            r.pos[0],
+                            r.pos[1],
+                            matched[i],
+                            last_actions.borrow().get(i),
+                            peers.join(", "),
+                            boxes.join(", ")
+                        );
+                    }
+                }
                 for (j, m) in machines.iter().enumerate() {
+                    let to_j = (0..robots.len()).find(|&i| matched[i] == Some(j));
+                    let c = &mut cycle[j];
+                    if to_j.is_some() && c.0.is_some() && to_j != c.0 {
+                        c.1 += 1;
+                    }
+                    c.0 = to_j;
+                    if trace {
+                        let r = to_j.map_or("-".to_string(), |i| {
+                            let acts = last_actions.borrow();
+                            let a = acts
+                                .get(i)
+                                .filter(|&&a| a != obs::targets::TargetAction::Matched as u8)
+                                .and_then(|&a| obs::targets::TargetAction::from_index(a))
+                                .map_or("", |a| a.name());
+                            let still = last_pos.get(i).is_some_and(|q| {
+                                obs::geom::norm([q[0] - robots[i].pos[0], q[1] - robots[i].pos[1]])
+                                    < 0.1 * step
+                            });
+                            format!(
+                                "r{i}@{:.0}{}{a}",
+                                obs::geom::box_distance(m.centre, m.half, robots[i].pos) / step,
+                                if still { "s" } else { "" }
+                            )
+                        });
+                        history[j].push(format!("{}{r}", if m.part_ready { "R:" } else { "" }));
+                    }
+                    let in_reach = robots.iter().any(|r| {
+                        !r.has_part && obs::geom::box_distance(m.centre, m.half, r.pos) <= near
+                    });
+                    if m.part_ready && !in_reach {
+                        c.2 = true;
+                    }
                     if last_ready[j] && !m.part_ready {
+                        if picked_once[j] {
+                            if c.2 {
+                                if trace {
+                                    println!("ep {ep} t {t} machine {j}: {}", history[j].join(" "));
+                                }
+                                late += 1;
+                                switches_late += c.1;
+                            } else {
+                                on_time += 1;
+                                switches_on_time += c.1;
+                            }
+                        }
+                        *c = (None, 0, false);
+                        if trace {
+                            history[j].clear();
+                        }
                         picked_once[j] = true;
                     }
                     last_ready[j] = m.part_ready;
@@ -97,6 +225,26 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                     };
                     waits[class] += 1;
                     let to_j = (0..robots.len()).find(|&i| matched[i] == Some(j));
+                    if class == 2 {
+                        let parked_here: Vec<u32> = robots
+                            .iter()
+                            .filter(|r| !r.has_part)
+                            .filter_map(|r| {
+                                machines.iter().find(|k| {
+                                    !k.part_ready
+                                        && obs::geom::box_distance(k.centre, k.half, r.pos) <= near
+                                })
+                            })
+                            .map(|k| k.timer)
+                            .collect();
+                        if let Some(w) = parked_here.iter().min() {
+                            parked += 1;
+                            parked_wait += *w as f64;
+                        }
+                        if (0..robots.len()).any(|i| !robots[i].has_part && matched[i].is_none()) {
+                            spare += 1;
+                        }
+                    }
                     if let Some(i) = to_j.filter(|_| class == 2) {
                         heading += 1;
                         heading_steps += (obs::geom::box_distance(m.centre, m.half, robots[i].pos)
@@ -104,10 +252,35 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                     }
                 }
                 final_carried = robots.iter().filter(|r| r.has_part).count() as u64;
+                // crawling: carrying or matched, away from every box, and moving less than
+                // a third of a full step
+                let storages: Vec<_> = env.storages().collect();
+                for (i, r) in robots.iter().enumerate() {
+                    let busy = r.has_part || matched[i].is_some();
+                    let away = machines
+                        .iter()
+                        .map(|m| obs::geom::box_distance(m.centre, m.half, r.pos))
+                        .chain(
+                            storages
+                                .iter()
+                                .map(|s| obs::geom::box_distance(s.centre, s.half, r.pos)),
+                        )
+                        .all(|d| d > near);
+                    let slow = last_pos.get(i).is_some_and(|q| {
+                        obs::geom::norm([q[0] - r.pos[0], q[1] - r.pos[1]]) < step / 3.0
+                    });
+                    if busy && away {
+                        moving_steps += 1;
+                        if slow {
+                            crawl_steps += 1;
+                        }
+                    }
+                }
+                last_pos = robots.iter().map(|r| r.pos).collect();
                 idle_steps += robots.iter().filter(|r| !r.has_part).count() as u64;
                 robot_steps += robots.len() as u64;
             },
-            |_, _| {},
+            |_, a| *last_actions.borrow_mut() = a.to_vec(),
         )?;
         parts += m.parts_delivered as u64;
         stranded += final_carried;
@@ -132,6 +305,22 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         "  en-route steps with a part-less robot matched to the machine: {:.1} % of them, that robot {:.1} steps from the box on average",
         100.0 * heading as f64 / waits[2].max(1) as f64,
         heading_steps / heading.max(1) as f64
+    );
+    println!(
+        "  en-route steps with a part-less robot parked at a busy machine: {:.1} % (that machine ready in {:.1} steps, the soonest); with a part-less robot unmatched: {:.1} %",
+        100.0 * parked as f64 / waits[2].max(1) as f64,
+        parked_wait / parked.max(1) as f64,
+        100.0 * spare as f64 / waits[2].max(1) as f64
+    );
+    println!(
+        "  robots carrying or matched, away from every box: {:.1} % of robot-steps, {:.1} % of those moving less than a third of a step",
+        100.0 * moving_steps as f64 / robot_steps.max(1) as f64,
+        100.0 * crawl_steps as f64 / moving_steps.max(1) as f64
+    );
+    println!(
+        "  cycles (pick to pick): {on_time} with a robot waiting, {late} late; matched-robot changes per cycle: {:.2} / {:.2}",
+        switches_on_time as f64 / on_time.max(1) as f64,
+        switches_late as f64 / late.max(1) as f64
     );
     Ok(())
 }
