@@ -59,6 +59,9 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     for ep in 0..episodes {
         let mut picked_once: Vec<bool> = Vec::new();
         let mut last_ready: Vec<bool> = Vec::new();
+        // the simulator's timers last step: one that went up is a pick, even of a part
+        // picked on the step it appeared (its flag never rises)
+        let mut last_timer: Vec<u32> = Vec::new();
         let mut final_carried = 0u64;
         // per machine: robot matched last step, switches since the last pick, late this cycle
         let mut cycle: Vec<(Option<usize>, u64, bool)> = Vec::new();
@@ -102,6 +105,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                 if picked_once.is_empty() {
                     picked_once = vec![false; machines.len()];
                     last_ready = vec![true; machines.len()];
+                    last_timer = vec![0; machines.len()];
                 }
                 if cycle.is_empty() {
                     cycle = vec![(None, 0, false); machines.len()];
@@ -188,7 +192,9 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                     if m.part_ready && !in_reach {
                         c.2 = true;
                     }
-                    if last_ready[j] && !m.part_ready {
+                    let picked = !m.part_ready && (last_ready[j] || m.timer > last_timer[j]);
+                    last_timer[j] = m.timer;
+                    if picked {
                         if picked_once[j] {
                             if c.2 {
                                 if trace {
@@ -318,7 +324,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         100.0 * crawl_steps as f64 / moving_steps.max(1) as f64
     );
     println!(
-        "  cycles whose part waited (a part picked on the step it appears is never seen ready): {on_time} with a part-less robot in reach at every ready step, {late} without; matched-robot changes per cycle: {:.2} / {:.2}",
+        "  machine cycles (pick to pick, after the first): {on_time} with a part-less robot in reach whenever the part was ready, {late} without; matched-robot changes per cycle: {:.2} / {:.2}",
         switches_on_time as f64 / on_time.max(1) as f64,
         switches_late as f64 / late.max(1) as f64
     );
