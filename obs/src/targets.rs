@@ -43,6 +43,22 @@ pub fn menu_size_ok(n: usize) -> bool {
 /// docs/RESULTS.md 7.8.
 pub const MATCH_BUSY_STEPS: f32 = 10.0;
 
+/// Weight of a robot's lateness at a machine (its travel steps beyond the machine's steps
+/// until ready) in the matching cost, when the part-less robots are at least as many as
+/// the machines ([`matched_machine`]). Then every machine gets a robot and every
+/// assignment sums the same waits, so travel plus wait only minimizes travel: it would send
+/// the robot that is 2 steps from both a ready machine and one ready in 15 to the busy one
+/// whenever the other robot is nearer the ready one, however far (the unit test
+/// `matching_weighs_lateness_when_every_machine_gets_a_robot`). With fewer robots than
+/// machines the weight is 0: the cost then chooses which machines to serve, and lateness
+/// there sent robots across the room (2.8_1 -23 % parts at weight 1 on every setup).
+/// Screened at 1, 2, 4 and 10 (28 setups, 20 episodes, seeds 7 and 8, the bundled
+/// policy): 4 gained +0.28 % and +0.21 % over all, +0.3 to +1.7 % on the balanced
+/// setups from 12 robots (12.8_4 +0.9 % / +1.5 %, 30.20_10 +1.4 % / +0.9 %, 50.20_5
+/// +1.0 % / +1.4 %), at most -0.7 % on one setup and seed (60.12_3, seed 8).
+/// docs/adr/0028-lateness-in-the-matching.md, docs/RESULTS.md 7.16.
+pub const MATCH_LATENESS_WEIGHT: f32 = 4.0;
+
 /// The menu, by action index.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 #[repr(u8)]
@@ -233,7 +249,9 @@ fn storages_crowded(storages: &[f32], peers: &[f32]) -> bool {
 /// two: on the 28-setup screen (seed 7 x 20 episodes, the bundled policy) the sum gained
 /// 1.3 % over the constant wait (2.8_1 +13 %, 5.10_2 +9 %), the later of the two 1.0 %,
 /// the wait weighted 0.75x-2x the same within 0.1 %, and counting a machine ready by
-/// the robot's arrival as ready lost 0.4 % (docs/RESULTS.md 7.13).
+/// the robot's arrival as ready lost 0.4 % (docs/RESULTS.md 7.13). When the part-less
+/// robots are at least as many as the machines, plus [`MATCH_LATENESS_WEIGHT`] x the
+/// steps the robot would arrive after the part is ready.
 ///
 /// The assignment minimizes the summed cost (Kuhn-Munkres, the `pathfinding` crate's),
 /// every robot and machine at most once. Every robot observes the same fleet, so robots
@@ -268,6 +286,11 @@ pub fn matched_machine(
                 .map(|q| [q[0], q[1]]),
         )
         .collect();
+    let lateness_weight = if robots.len() >= n_machines {
+        MATCH_LATENESS_WEIGHT
+    } else {
+        0.0
+    };
     // Kuhn-Munkres maximizes integer weights: minus the cost in thousandths of a step.
     let weight = |r: usize, j: usize| -> i64 {
         let (pos, m) = (robots[r], &machines[j * MACHINE_DIM..(j + 1) * MACHINE_DIM]);
@@ -279,7 +302,8 @@ pub fn matched_machine(
             (false, Some(t)) => t as f32,
             (false, None) => MATCH_BUSY_STEPS,
         };
-        let cost = (dx * dx + dy * dy).sqrt() / step + wait;
+        let travel = (dx * dx + dy * dy).sqrt() / step;
+        let cost = travel + wait + lateness_weight * (travel - wait).max(0.0);
         -((cost * 1000.0).round() as i64)
     };
     // The solver wants no more rows than columns: rows are the smaller side.
@@ -496,6 +520,36 @@ mod tests {
         let one = [0.9, 0.0, 1.0];
         assert_eq!(matched_machine(&own, &one, &peer, &p, &[]), None);
         assert_eq!(matched_machine(&own, &[], &peer, &p, &[]), None);
+    }
+
+    #[test]
+    fn matching_weighs_lateness_when_every_machine_gets_a_robot() {
+        let p = params(); // 0.05 m per step
+        let own = [0.0, 0.0, 0.0];
+        // Machine 0 ready, 2 steps left of this robot; machine 1 ready in 15 steps, 2 steps
+        // right. The peer is 10 steps from machine 0 and 14 from machine 1. Travel plus
+        // wait alone: this robot to machine 1 (2 + 15 + 10 = 27 against 2 + 14 + 15 = 31),
+        // leaving machine 0's part waiting 10 steps; with lateness it serves machine 0
+        // (the peer arrives 1 step before machine 1's part).
+        let machines = [-0.1, 0.0, 1.0, 0.1, 0.0, 0.0];
+        let ready_in = [Some(0), Some(15)];
+        let peer = [-0.6, 0.0, 0.0];
+        assert_eq!(
+            matched_machine(&own, &machines, &peer, &p, &ready_in),
+            Some(0)
+        );
+        // A second peer next to machine 1 takes it whatever the weight: then this robot
+        // serves machine 0 by either cost, and the far peer is left out.
+        let peers = [-0.6, 0.0, 0.0, 0.15, 0.0, 0.0];
+        assert_eq!(
+            matched_machine(&own, &machines, &peers, &p, &ready_in),
+            Some(0)
+        );
+        // Fewer robots than machines (a third, ready one 2 m away): no lateness term, so
+        // the first case goes by travel plus wait again and this robot takes machine 1.
+        let three = [-0.1, 0.0, 1.0, 0.1, 0.0, 0.0, 2.0, 0.0, 1.0];
+        let ready3 = [Some(0), Some(15), Some(0)];
+        assert_eq!(matched_machine(&own, &three, &peer, &p, &ready3), Some(1));
     }
 
     #[test]
