@@ -77,8 +77,6 @@ impl MachineClock {
         }
     }
 
-    /// Steps until machine `j` (observation index at the last [`Self::update`]) has a part
-    /// ready: 0 when ready now, None when not known.
     /// Count `n` steps that passed unobserved (a real-time robot that missed states), before
     /// the next [`Self::update`]. A busy machine's count goes down by `n`; one that ran out
     /// meanwhile made its part, which the flag still being down at the next update says
@@ -94,6 +92,8 @@ impl MachineClock {
         }
     }
 
+    /// Steps until machine `j` (observation index at the last [`Self::update`]) has a part
+    /// ready: 0 when ready now, None when not known.
     pub fn ready_in(&self) -> &[Option<u32>] {
         &self.ready_in
     }
