@@ -36,8 +36,9 @@ pub fn menu_size_ok(n: usize) -> bool {
 /// in control steps on top of the travel: half the default preparation time (20 steps),
 /// the expected wait at a machine whose pick was seen at a random moment. A machine the
 /// robot has timed ([`crate::machine_clock`]) costs its steps until ready instead. A
-/// nearer busy machine can so beat a farther ready one. Screened without retraining (seed 7, 20 episodes, the 7-entry bundled
-/// policy with "nearest busy" replaced by the matching): with 10 steps 6.4_2 35.1 ->
+/// nearer busy machine can so beat a farther ready one. Screened without retraining
+/// (seed 7, 20 episodes, the 7-entry bundled policy with "nearest busy" replaced by the
+/// matching): with 10 steps 6.4_2 35.1 ->
 /// 36.2 parts, 42.28_14 255.3 -> 263.9; ready machines strictly first (busy ones only
 /// by distance after every ready one) gave 35.9 / 263.6, 20 steps 35.9 / 263.8.
 /// docs/RESULTS.md 7.8.

@@ -218,21 +218,18 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                     if !m.part_ready {
                         continue;
                     }
-                    let mut free = robots.iter().filter(|r| !r.has_part).peekable();
                     let class = if !picked_once[j] {
                         0
-                    } else if free.peek().is_none() {
+                    } else if robots.iter().all(|r| r.has_part) {
                         3
-                    } else if free.any(|r| obs::geom::box_distance(m.centre, m.half, r.pos) <= near)
-                    {
+                    } else if in_reach {
                         1
                     } else {
                         2
                     };
                     waits[class] += 1;
-                    let to_j = (0..robots.len()).find(|&i| matched[i] == Some(j));
                     if class == 2 {
-                        let parked_here: Vec<u32> = robots
+                        let parked_soonest = robots
                             .iter()
                             .filter(|r| !r.has_part)
                             .filter_map(|r| {
@@ -242,10 +239,10 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                                 })
                             })
                             .map(|k| k.timer)
-                            .collect();
-                        if let Some(w) = parked_here.iter().min() {
+                            .min();
+                        if let Some(w) = parked_soonest {
                             parked += 1;
-                            parked_wait += *w as f64;
+                            parked_wait += w as f64;
                         }
                         if (0..robots.len()).any(|i| !robots[i].has_part && matched[i].is_none()) {
                             spare += 1;
