@@ -305,6 +305,11 @@ impl DPEventLoop {
       let poll_timeout = timeout_until(ev_wrapper.shared_timer.borrow().next_deadline(), idle_cap);
       match ev_wrapper.poll.poll(&mut events, Some(poll_timeout)) {
         Ok(_) => {}
+        // A signal handled by another part of the process, or a stop and continue
+        // (Ctrl-Z, then `fg`; a debugger attaching), makes epoll_wait return EINTR.
+        // Nothing is wrong: poll again. Ending the loop here left the participant deaf
+        // and mute for good.
+        Err(e) if e.kind() == std::io::ErrorKind::Interrupted => continue,
         Err(e) => {
           error!("dp_event_loop poll failed: {e:?}");
           break;
