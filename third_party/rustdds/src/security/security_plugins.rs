@@ -1333,7 +1333,10 @@ impl SecurityPlugins {
 #[derive(Clone)]
 pub(crate) struct SecurityPluginsHandle {
   inner: Arc<Mutex<SecurityPlugins>>,
-  who_has_it: Arc<Mutex<Option<String>>>,
+  // The thread that last took the lock, and where in the source: when a thread waits
+  // for the lock for long, the log names the holder's call site (a deadlock shows
+  // where to look without a debugger attached).
+  who_has_it: Arc<Mutex<Option<(Option<String>, &'static std::panic::Location<'static>)>>>,
 }
 
 impl SecurityPluginsHandle {
@@ -1344,20 +1347,26 @@ impl SecurityPluginsHandle {
     }
   }
 
+  #[track_caller]
   pub(crate) fn get_plugins(&self) -> MutexGuard<'_, SecurityPlugins> {
+    let caller = std::panic::Location::caller();
     let mut count = 0;
     loop {
       match self.try_lock() {
         Ok(guard) => {
-          *self.who_has_it.lock().unwrap() = std::thread::current().name().map(|s| s.to_owned());
+          *self.who_has_it.lock().unwrap() =
+            Some((std::thread::current().name().map(|s| s.to_owned()), caller));
           return guard;
         }
         Err(std::sync::TryLockError::WouldBlock) => {
           if count > 10 {
+            let holder = self.who_has_it.lock().unwrap().clone();
             error!(
-              "I need my lock!! {:?} Looks like {:?} has it.",
+              "I need my lock!! {:?} at {}. Looks like {:?} has it, taken at {}.",
               count,
-              self.who_has_it.lock().unwrap()
+              caller,
+              holder.as_ref().and_then(|h| h.0.clone()),
+              holder.map_or_else(|| "?".to_owned(), |h| h.1.to_string()),
             );
           }
           count += 1;
