@@ -67,6 +67,11 @@ pub struct Params {
     /// after `lockstep_wait_s`), and tag cmd_vel with the state's stamp. Implies sim time.
     pub lockstep: bool,
     pub lockstep_wait_s: f64,
+    /// Lockstep: send the answer to a state again every this many seconds while the bridge
+    /// has not published the next one (0: never). An answer written before the DDS
+    /// Security key exchange with the bridge finished never reaches it (volatile QoS)
+    /// (docs/adr/0029-lockstep-resends.md).
+    pub lockstep_resend_s: f64,
     /// Real time on the wall clock: act on each new state as soon as own data and every
     /// expected entity of its stamp are in (or after `state_wait_s`), instead of at the
     /// control timer's phase; the timer then only repeats the last command while no new
@@ -125,6 +130,7 @@ impl Default for Params {
             storage_half: [0.15, 0.08],
             lockstep: false,
             lockstep_wait_s: 0.5,
+            lockstep_resend_s: 0.5,
             act_on_state: true,
             state_wait_s: 0.03,
             stats_json: false,
@@ -150,7 +156,7 @@ parameters: policy (path), controller (greedy|greedy-orca|policy), shield (false
             k_speed (0.5), prep_steps (20), stale_timeout_s (1.0), static_stale_timeout_s (= stale_timeout_s, <=0 off),
             room_margin (0.25), stats_period_s (10), discovery_period_s (0.5),
             robot_radius (0.08), machine_half_x/_y (0.12), storage_half_x (0.15), storage_half_y (0.08),
-            lockstep (false; implies use_sim_time), lockstep_wait_s (0.5),
+            lockstep (false; implies use_sim_time), lockstep_wait_s (0.5), lockstep_resend_s (0.5; 0 never),
             act_on_state (true: real time acts when a state is in), state_wait_s (0.03),
             stats_json (false; counters as JSON lines on stdout),
             robots (multi-robot mode: robot_0,robot_1,... or robot_0..N-1 in one process),
@@ -226,6 +232,7 @@ fn apply_param(p: &mut Params, name: &str, v: &ParamValue) -> Result<bool, ArgEr
         "storage_half_x" => p.storage_half[0] = positive(name, v)?,
         "storage_half_y" => p.storage_half[1] = positive(name, v)?,
         "lockstep_wait_s" => p.lockstep_wait_s = positive(name, v)?,
+        "lockstep_resend_s" => p.lockstep_resend_s = non_negative(name, v)?,
         "lockstep" => p.lockstep = boolean(name, v)?,
         "act_on_state" => p.act_on_state = boolean(name, v)?,
         "state_wait_s" => p.state_wait_s = positive(name, v)?,

@@ -21,6 +21,7 @@ use crate::args::Params;
 use crate::fanout;
 use crate::hosted::{
     heartbeat, hold, host, lockstep_step, print_stats_json, state_step, tick_now, Hosted,
+    LockstepTiming,
 };
 use crate::node::{retry, RobotSpec};
 use crate::readers::{drain, Readers, Sub, SubKind};
@@ -95,6 +96,8 @@ struct EventLoop<'a> {
     /// How long a state is waited for to be complete: `lockstep_wait_s` in lockstep,
     /// `state_wait_s` in real time with `act_on_state`.
     state_wait: Duration,
+    /// Lockstep: `lockstep_resend_s`.
+    lockstep_resend: Duration,
     stats_period: Duration,
     next_discovery: Instant,
     next_sweep: Instant,
@@ -146,6 +149,7 @@ impl<'a> EventLoop<'a> {
             } else {
                 p.state_wait_s
             }),
+            lockstep_resend: Duration::from_secs_f64(p.lockstep_resend_s),
             stats_period,
             next_discovery: t0,
             next_sweep: t0,
@@ -367,9 +371,13 @@ impl<'a> EventLoop<'a> {
         if let Some(clock) = self.clock_sub.as_ref() {
             while let Ok(Some(_)) = clock.take() {} // /clock is not used in lockstep
         }
+        let timing = LockstepTiming {
+            wait: self.state_wait,
+            resend: self.lockstep_resend,
+        };
         for h in self.hosted.iter_mut() {
             let now = self.t0.elapsed().as_secs_f64();
-            lockstep_step(h, &self.log, self.state_wait, now);
+            lockstep_step(h, &self.log, timing, now);
         }
     }
 

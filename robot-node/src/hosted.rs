@@ -35,6 +35,8 @@ pub(crate) struct Hosted {
     /// Lockstep: the last state acted on, and the state waited for (since when).
     pub(crate) last_acted: Option<i64>,
     pub(crate) pending: Option<(i64, Instant)>,
+    /// Lockstep: the command answering `last_acted`, and when it last went out.
+    pub(crate) last_answer: Option<([f64; 2], Instant)>,
 }
 
 impl Hosted {
@@ -89,6 +91,7 @@ pub(crate) fn host(
             last_outcome: None,
             last_acted: None,
             pending: None,
+            last_answer: None,
         });
     }
     Ok(hosted)
@@ -203,9 +206,19 @@ pub(crate) fn heartbeat(h: &mut Hosted, log: &NodeLoggingHandle, now: f64) {
     log_outcome(h, log, &r, "controlling");
 }
 
+/// Lockstep timing: how long a state is waited for to be complete, and how often an
+/// unanswered-looking answer is sent again (0: never).
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct LockstepTiming {
+    pub(crate) wait: Duration,
+    pub(crate) resend: Duration,
+}
+
 /// Lockstep: act once `h`'s own data and every expected entity of the newest state are in
-/// (or after `wait`).
-pub(crate) fn lockstep_step(h: &mut Hosted, log: &NodeLoggingHandle, wait: Duration, now: f64) {
+/// (or after `t.wait`). While no newer state comes, the answer goes out again every
+/// `t.resend`: the bridge may not have received it (ADR 0029).
+pub(crate) fn lockstep_step(h: &mut Hosted, log: &NodeLoggingHandle, t: LockstepTiming, now: f64) {
+    let wait = t.wait;
     let Some(s) = h.brain.world.own_pose_stamp() else {
         return;
     };
@@ -213,9 +226,13 @@ pub(crate) fn lockstep_step(h: &mut Hosted, log: &NodeLoggingHandle, wait: Durat
         info!("{}sim time went back: resetting controller", h.tag);
         h.brain.reset();
         h.last_acted = None;
+        h.last_answer = None;
         h.pending = None;
     }
     if h.last_acted.is_some_and(|l| s <= l) {
+        if h.last_acted == Some(s) && !t.resend.is_zero() {
+            resend_answer(h, s, t.resend);
+        }
         return;
     }
     let since = pending_since(h, s);
@@ -232,8 +249,21 @@ pub(crate) fn lockstep_step(h: &mut Hosted, log: &NodeLoggingHandle, wait: Durat
         let r = h.brain.tick_lockstep(s);
         h.publish(r.velocity, Some(s));
         h.last_acted = Some(s);
+        h.last_answer = Some((r.velocity, Instant::now()));
         h.pending = None;
         log_outcome(h, log, &r, "controlling (lockstep)");
+    }
+}
+
+/// Lockstep: the answer to state `s` again, if it went out `resend` ago or more.
+fn resend_answer(h: &mut Hosted, s: i64, resend: Duration) {
+    let Some((v, at)) = h.last_answer else {
+        return;
+    };
+    if at.elapsed() >= resend {
+        h.publish(v, Some(s));
+        h.last_answer = Some((v, Instant::now()));
+        h.brain.counters.lockstep_resends += 1;
     }
 }
 

@@ -107,6 +107,9 @@ pub struct Counters {
     pub subscriptions: u64,
     /// Lockstep: states acted on before every expected entity of that stamp was in.
     pub lockstep_wait_timeouts: u64,
+    /// Lockstep: answers sent again because the bridge had not moved on after
+    /// `lockstep_resend_s` (docs/adr/0029-lockstep-resends.md).
+    pub lockstep_resends: u64,
     /// Real time (`act_on_state`): states acted on after `state_wait_s` with some expected
     /// entity of that stamp still missing (its older sample was used).
     pub state_wait_timeouts: u64,
@@ -160,6 +163,7 @@ impl Counters {
         self.publish_errors += o.publish_errors;
         self.subscriptions += o.subscriptions;
         self.lockstep_wait_timeouts += o.lockstep_wait_timeouts;
+        self.lockstep_resends += o.lockstep_resends;
         self.state_wait_timeouts += o.state_wait_timeouts;
         self.ticks_missed += o.ticks_missed;
         self.tick_late_max_us = self.tick_late_max_us.max(o.tick_late_max_us);
@@ -192,6 +196,7 @@ impl Counters {
             "publish_errors": self.publish_errors,
             "subscriptions": self.subscriptions,
             "lockstep_wait_timeouts": self.lockstep_wait_timeouts,
+            "lockstep_resends": self.lockstep_resends,
             "state_wait_timeouts": self.state_wait_timeouts,
             "ticks_missed": self.ticks_missed,
             "tick_late_max_us": self.tick_late_max_us,
@@ -206,8 +211,8 @@ impl std::fmt::Display for Counters {
             "accepted={} dropped(decode={} non_finite={} out_of_room={} unexpected={} \
              foreign_writer={}) writer_changes={} ticks={} commands={} repeated_commands={} \
              peer_poses(used={} off_stamp={}) zero(own_stale={} discovering={} obs_invalid={} controller_error={} bad_output={}) \
-             publish_errors={} subscriptions={} lockstep_wait_timeouts={} state_wait_timeouts={} \
-             ticks_missed={} tick_late_max_us={}",
+             publish_errors={} subscriptions={} lockstep_wait_timeouts={} lockstep_resends={} \
+             state_wait_timeouts={} ticks_missed={} tick_late_max_us={}",
             self.accepted,
             self.dropped_decode,
             self.dropped_non_finite,
@@ -228,6 +233,7 @@ impl std::fmt::Display for Counters {
             self.publish_errors,
             self.subscriptions,
             self.lockstep_wait_timeouts,
+            self.lockstep_resends,
             self.state_wait_timeouts,
             self.ticks_missed,
             self.tick_late_max_us

@@ -35,12 +35,18 @@ pub struct BridgeCounters {
     pub cmds_dropped_decode: u64,
     /// Lockstep: commands answering an older state than the current one.
     pub cmds_late: u64,
+    /// Lockstep: copies of an answer already received (robot_node resends its answer
+    /// while the bridge has not moved on, ADR 0029); not late, never used again.
+    pub cmds_repeated: u64,
     /// A first cmd_vel that could not spawn a body (no free spot).
     pub spawn_failures: u64,
     pub spawned: u64,
     pub despawned: u64,
     /// Lockstep: steps taken before every robot answered.
     pub lockstep_timeouts: u64,
+    /// Lockstep: a state published again because some robot had not answered it after
+    /// `lockstep_resend_s` (docs/adr/0029-lockstep-resends.md).
+    pub state_resends: u64,
     pub commands_ok: u64,
     pub commands_failed: u64,
     /// Realtime: robot-steps by the age of the state the applied command answers, in
@@ -92,6 +98,8 @@ pub enum CmdOutcome {
     Spawned(RobotId),
     DroppedNonFinite,
     DroppedLate,
+    /// Lockstep: a copy of the answer to an older state the robot already gave.
+    DroppedRepeated,
     SpawnFailed(String),
 }
 
@@ -203,11 +211,13 @@ impl Core {
         if self.p.mode == Mode::Lockstep {
             if let Some((key, _, _)) = &self.published {
                 if stamp.is_some_and(|s| s < *key) {
-                    self.counters.cmds_late += 1;
-                    // still proof of life
-                    if let Some(slot) = self.robots.get_mut(name) {
-                        slot.last_cmd_at = Some(now);
+                    let slot = self.robots.get_mut(name).expect("present or spawned");
+                    slot.last_cmd_at = Some(now); // still proof of life
+                    if slot.cmd_stamp == stamp {
+                        self.counters.cmds_repeated += 1;
+                        return CmdOutcome::DroppedRepeated;
                     }
+                    self.counters.cmds_late += 1;
                     return CmdOutcome::DroppedLate;
                 }
             }
@@ -291,7 +301,18 @@ impl Core {
             None => true, // removed meanwhile
             Some(s) => s.cmd_stamp == Some(*key),
         });
-        (all, now - at > self.p.lockstep_timeout_s)
+        // The first state waits at least until the start-up grace: a robot may still be
+        // finishing its DDS Security handshakes and key exchange, which under load take
+        // longer than a step's timeout; the state is resent meanwhile (ADR 0029).
+        let first = self.env.steps() == 0;
+        let timed_out =
+            now - at > self.p.lockstep_timeout_s && (!first || now >= self.p.startup_grace_s);
+        (all, timed_out)
+    }
+
+    /// Lockstep: the published state goes out again (a robot had not answered it).
+    pub fn count_state_resend(&mut self) {
+        self.counters.state_resends += 1;
     }
 
     /// One simulator step with the current commands. Lockstep: a robot's command counts

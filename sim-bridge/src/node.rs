@@ -355,6 +355,8 @@ struct Bridge<'a> {
     /// The simulator steps (lockstep: the first state went out; realtime: every initial
     /// robot commands from state, see `wait_for_robots`).
     started: bool,
+    /// Lockstep: when (s since start) the current state last went out, first or resent.
+    state_sent_at: f64,
 }
 
 impl<'a> Bridge<'a> {
@@ -419,6 +421,7 @@ impl<'a> Bridge<'a> {
             metrics_period,
             next_metrics: t_start + metrics_period,
             started: p.mode == Mode::Realtime && !p.wait_for_robots,
+            state_sent_at: 0.0,
         };
         for n in b.initial.clone() {
             b.subscribe_cmd(&n)?;
@@ -646,6 +649,7 @@ impl<'a> Bridge<'a> {
                 self.started = true;
                 self.publish_state(true)?;
                 self.core.mark_published(t);
+                self.state_sent_at = t;
             }
             return Ok(());
         }
@@ -657,6 +661,15 @@ impl<'a> Bridge<'a> {
             self.core.step(t, !all)?;
             self.publish_state(true)?;
             self.core.mark_published(t);
+            self.state_sent_at = t;
+        } else if self.p.lockstep_resend_s > 0.0
+            && t - self.state_sent_at >= self.p.lockstep_resend_s
+        {
+            // Same state, same stamps: a robot that already acted on it ignores it (and
+            // resends its answer instead, robot_node's `lockstep_resend_s`).
+            self.publish_state(true)?;
+            self.core.count_state_resend();
+            self.state_sent_at = t;
         }
         Ok(())
     }

@@ -13,7 +13,8 @@ pub const DEFAULT_NODE_NAME: &str = "sim_bridge";
 pub const USAGE: &str = "usage: sim_bridge [--ros-args [-p NAME:=VALUE]... [--params-file FILE.yaml]...]
 parameters: setup (6.4_2), seed (0), mode (realtime|lockstep), rate_hz (10), stale_timeout_s (2.0),
             config (scenario TOML; default: built-in), spawn_initial (true), max_steps (0 = run until stopped),
-            lockstep_timeout_s (2.0), startup_grace_s (10.0), settle_s (2.0), metrics_period_s (1.0),
+            lockstep_timeout_s (2.0), lockstep_resend_s (0.5: publish a state again while a robot
+            has not answered it; 0 = never), startup_grace_s (10.0), settle_s (2.0), metrics_period_s (1.0),
             wait_for_robots (true: realtime holds the simulator at its first state until every
             initial robot commands from state, at most startup_grace_s),
             discovery_period_s (0.5), record (bag directory: record every published topic and every
@@ -53,6 +54,12 @@ pub struct BridgeParams {
     /// Stop after this many steps (0: run until stopped).
     pub max_steps: u64,
     pub lockstep_timeout_s: f64,
+    /// Lockstep: publish the current state again every this many seconds while some robot
+    /// has not answered it (0: never). A sample written before the DDS Security key
+    /// exchange with a reader finished never reaches it (volatile QoS), so without this a
+    /// robot that joined the data late would wait for a state that never comes
+    /// (docs/adr/0029-lockstep-resends.md).
+    pub lockstep_resend_s: f64,
     /// Initial bodies are kept this long without any cmd_vel.
     pub startup_grace_s: f64,
     /// Realtime: hold the simulator at its first state (published at the rate) until every
@@ -94,6 +101,7 @@ impl Default for BridgeParams {
             spawn_initial: true,
             max_steps: 0,
             lockstep_timeout_s: 2.0,
+            lockstep_resend_s: 0.5,
             startup_grace_s: 10.0,
             wait_for_robots: true,
             settle_s: 2.0,
@@ -151,6 +159,7 @@ fn apply_param(p: &mut BridgeParams, n: &str, v: &ParamValue) -> Result<bool, Ar
         "rate_hz" => p.rate_hz = rate_hz(n, v)?,
         "stale_timeout_s" => p.stale_timeout_s = positive(n, v)?,
         "lockstep_timeout_s" => p.lockstep_timeout_s = positive(n, v)?,
+        "lockstep_resend_s" => p.lockstep_resend_s = non_negative(n, v)?,
         "startup_grace_s" => p.startup_grace_s = non_negative(n, v)?,
         "startup_timeout_s" => p.startup_timeout_s = timeout_s(n, v)?,
         "stall_timeout_s" => p.stall_timeout_s = timeout_s(n, v)?,

@@ -63,6 +63,35 @@ fn greedy_fleet_in_lockstep_reproduces_the_offline_episode() {
     assert_same("greedy", &off, &m, steps);
 }
 
+/// The bridge publishes the first state as soon as every robot's cmd_vel is discovered,
+/// before the robots have subscribed to their state: the state and the answers go out again
+/// until they get through (ADR 0029), and no robot is lost. (Without resends every robot
+/// was despawned. The episode itself is not compared: a robot acting before it discovered
+/// every peer sees fewer bodies than the offline episode does, which is what `settle_s`
+/// is for.)
+#[test]
+fn lockstep_without_settling_loses_no_robot() {
+    let setup = Setup::new(4, 3, 2);
+    let (seed, steps) = (5, 60);
+    let env0 = Env::new(ScenarioConfig::default(), setup, seed).unwrap();
+    let m = fleet_lockstep_in(
+        setup,
+        seed,
+        steps,
+        domain(3),
+        &env0,
+        None,
+        &[],
+        &["settle_s:=0.0"],
+        None,
+    );
+    eprintln!("no settling: {m}");
+    assert_eq!(m["step"], steps, "{m}");
+    assert_eq!(m["despawned"], 0, "{m}");
+    assert_eq!(m["lockstep_timeouts"], 0, "{m}");
+    assert_eq!(m["robots_on_state"], setup.robots, "{m}");
+}
+
 #[test]
 fn paper_policy_fleet_in_lockstep_reproduces_the_offline_episode() {
     // The paper's 5-move policy, raw: its actions are stepped as the simulator's own.
@@ -119,6 +148,7 @@ fn secure_policy_fleet_in_lockstep_reproduces_the_offline_episode() {
         &env0,
         Some(&path),
         &["orca_filter:=false"],
+        &[],
         Some(&root),
     );
     assert_same("secure policy", &off, &m, steps);

@@ -75,18 +75,37 @@ fn lockstep_waits_for_every_answer_and_ignores_late_ones() {
         );
     }
     assert_eq!(c.lockstep_status(0.2), (false, false));
-    assert_eq!(c.lockstep_status(2.5), (false, true));
+    // the first state is waited for until the start-up grace (5 s here), not only the
+    // step timeout (2 s): security handshakes may still be running (ADR 0029)
+    assert_eq!(c.lockstep_status(2.5), (false, false));
+    assert_eq!(c.lockstep_status(5.1), (false, true));
     c.on_cmd("robot_5", &Twist::planar(0.0, 0.5), Some(k0), 0.3);
     assert!(c.lockstep_status(0.3).0);
     c.step(0.3, false).unwrap();
     c.mark_published(0.3);
-    // an answer to the old state is late, not an answer to the new one
+    // a resent copy of an answer already received is a repeat (ADR 0029), not an answer
+    // to the new state
     assert_eq!(
         c.on_cmd("robot_0", &Twist::planar(0.5, 0.0), Some(k0), 0.4),
-        CmdOutcome::DroppedLate
+        CmdOutcome::DroppedRepeated
     );
     assert!(!c.lockstep_status(0.4).0);
     assert_eq!(c.stamp_key(), 100_000);
+    // an answer to the old state from a robot that had not given it is late
+    c.on_cmd(
+        "robot_1",
+        &Twist::planar(0.5, 0.0),
+        Some(c.stamp_key()),
+        0.4,
+    );
+    assert_eq!(
+        c.on_cmd("robot_1", &Twist::planar(0.5, 0.0), Some(k0), 0.4),
+        CmdOutcome::DroppedLate
+    );
+    assert_eq!((c.counters.cmds_late, c.counters.cmds_repeated), (1, 1));
+    // later states time out after the step timeout alone
+    assert_eq!(c.lockstep_status(2.2), (false, false));
+    assert_eq!(c.lockstep_status(2.4), (false, true));
 }
 
 #[test]

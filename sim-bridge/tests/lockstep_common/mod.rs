@@ -131,7 +131,7 @@ pub fn fleet_lockstep(
     policy: Option<&std::path::Path>,
     extra: &[&str],
 ) -> serde_json::Value {
-    fleet_lockstep_in(setup, seed, steps, domain, env0, policy, extra, None)
+    fleet_lockstep_in(setup, seed, steps, domain, env0, policy, extra, &[], None)
 }
 
 /// The ROS 2 security environment of a process in enclave `enclave` of `keystore`
@@ -144,7 +144,8 @@ fn secure(cmd: &mut Command, keystore: &std::path::Path, enclave: &str) {
         .args(["--enclave", enclave]);
 }
 
-/// [`fleet_lockstep`], with DDS Security when `keystore` is given (enclaves
+/// [`fleet_lockstep`], with `bridge_extra` parameters for the bridge (`NAME:=VALUE`, after
+/// the harness's own) and DDS Security when `keystore` is given (enclaves
 /// `/tending/robot_<i>` and `/tending/sim_bridge`, as `tending security create` makes).
 #[allow(clippy::too_many_arguments)]
 pub fn fleet_lockstep_in(
@@ -155,6 +156,7 @@ pub fn fleet_lockstep_in(
     env0: &Env,
     policy: Option<&std::path::Path>,
     extra: &[&str],
+    bridge_extra: &[&str],
     keystore: Option<&std::path::Path>,
 ) -> serde_json::Value {
     let s = env0.sizes();
@@ -200,11 +202,14 @@ pub fn fleet_lockstep_in(
         .args(["-p", "settle_s:=2.0", "-p", "lockstep_timeout_s:=3.0"])
         .args(["-p", "stale_timeout_s:=10.0", "--disable-rosout-logs"])
         .stdout(Stdio::piped())
-        .stderr(Stdio::null());
+        .stderr(std::fs::File::create(logs.join("sim_bridge.log")).unwrap());
     if let Some(ks) = keystore {
         // Authentication and key exchange between every pair of participants come first.
         bridge.args(["-p", "settle_s:=8.0"]);
         secure(&mut bridge, ks, "/tending/sim_bridge");
+    }
+    for e in bridge_extra {
+        bridge.args(["-p", e]);
     }
     let mut bridge = bridge.spawn().unwrap();
     let out = bridge.stdout.take().unwrap();
@@ -228,25 +233,49 @@ pub fn fleet_lockstep_in(
         }
         if Instant::now() > deadline {
             let _ = bridge.kill();
+            drop(kids);
+            print_logs(&logs, setup.robots);
             panic!("bridge did not finish {steps} steps in time; last metrics {last:?}");
         }
     }
     let status = bridge.wait().unwrap();
-    assert!(status.success(), "sim_bridge exited with {status}");
     drop(kids);
+    if !status.success() {
+        print_logs(&logs, setup.robots);
+        panic!("sim_bridge exited with {status}; last metrics {last:?}");
+    }
     let troubled = last
         .as_ref()
         .is_some_and(|m| m["despawned"] != 0 || m["lockstep_timeouts"] != 0);
-    for i in (0..setup.robots).filter(|_| troubled) {
-        let text = std::fs::read_to_string(log_of(i)).unwrap_or_default();
-        let tail: Vec<&str> = text.lines().rev().take(15).collect();
-        eprintln!("--- robot_{i} log, last {} lines:", tail.len());
+    if troubled {
+        print_logs(&logs, setup.robots);
+    } else {
+        let _ = std::fs::remove_dir_all(&logs);
+    }
+    last.expect("no metrics line from sim_bridge")
+}
+
+/// The telling lines of the bridge's and every robot's log (a rare failure under load had
+/// nothing else to go on); the directory is kept.
+fn print_logs(logs: &std::path::Path, robots: usize) {
+    // Lines every secure start-up logs many times; they hide the ones that tell.
+    let noise = ["have incompatible security", "crypto tokens. Storing them"];
+    let names =
+        std::iter::once("sim_bridge".to_string()).chain((0..robots).map(|i| format!("robot_{i}")));
+    for name in names {
+        let text = std::fs::read_to_string(logs.join(format!("{name}.log"))).unwrap_or_default();
+        let tail: Vec<&str> = text
+            .lines()
+            .filter(|l| !noise.iter().any(|n| l.contains(n)))
+            .rev()
+            .take(25)
+            .collect();
+        eprintln!("--- {name} log, last {} telling lines:", tail.len());
         for l in tail.iter().rev() {
             eprintln!("{l}");
         }
     }
-    let _ = std::fs::remove_dir_all(&logs);
-    last.expect("no metrics line from sim_bridge")
+    eprintln!("logs kept in {}", logs.display());
 }
 
 pub fn assert_same(name: &str, off: &Offline, m: &serde_json::Value, steps: u32) {
