@@ -562,10 +562,15 @@ impl InnerPublisher {
     #[cfg(feature = "security")]
     if let Some(sec_handle) = self.security_plugins_handle.as_ref() {
       // Security is enabled.
-      // Check are we allowed to create the DataWriter from Access control
+      // Check are we allowed to create the DataWriter from Access control.
+      // The domain id is read first: `dp.domain_id()` locks the participant, and
+      // taking that lock while holding the plugins lock deadlocks against
+      // DomainParticipant::create_topic, which holds the participant lock while it
+      // takes the plugins lock (check_create_topic).
+      let domain_id = dp.domain_id();
       let check_res = sec_handle.get_plugins().check_create_datawriter(
         guid.prefix,
-        dp.domain_id(),
+        domain_id,
         topic.name(),
         &writer_qos,
       );
@@ -1179,10 +1184,14 @@ impl InnerSubscriber {
     #[cfg(feature = "security")]
     if let Some(sec_handle) = self.security_plugins_handle.as_ref() {
       // Security is enabled.
-      // Check are we allowed to create the DataReader from Access control
+      // Check are we allowed to create the DataReader from Access control.
+      // The domain id is read first, not under the plugins lock (see
+      // create_datawriter): the two locks in opposite orders deadlocked a robot's ros
+      // spinner (creating its readers) against its main thread (creating a topic).
+      let domain_id = dp.domain_id();
       let check_res = sec_handle.get_plugins().check_create_datareader(
         reader_guid.prefix,
-        dp.domain_id(),
+        domain_id,
         topic.name(),
         &qos,
       );
