@@ -13,6 +13,9 @@ use anyhow::{anyhow, bail, Context, Result};
 use super::children::{BridgeProc, RobotProc};
 use super::{layout, FleetArgs, BRIDGE};
 
+/// The bridge's `startup_grace_s` with DDS Security (its default is 10 s).
+pub(super) const SECURE_STARTUP_GRACE_S: f64 = 30.0;
+
 fn sibling(name: &str) -> Result<PathBuf> {
     let exe = std::env::current_exe().context("locating the tending executable")?;
     let p = exe
@@ -262,6 +265,14 @@ impl Plan {
         }
         if let Some(ks) = &self.keystore {
             super::secure::env(&mut b, ks, keystore::BRIDGE_ENCLAVE);
+            // A secure handshake whose best-effort messages are lost under load is
+            // retried once a second and took 3-9 s with two 6-robot fleets on 2 cores
+            // (third_party/README.md). The bridge waits that long for a robot's first
+            // answer (ADR 0029) before stepping without it.
+            b.args([
+                "-p",
+                &format!("startup_grace_s:={SECURE_STARTUP_GRACE_S:?}"),
+            ]);
         }
         let mut child = b
             .spawn()

@@ -204,8 +204,10 @@ pub fn fleet_lockstep_in(
         .stdout(Stdio::piped())
         .stderr(std::fs::File::create(logs.join("sim_bridge.log")).unwrap());
     if let Some(ks) = keystore {
-        // Authentication and key exchange between every pair of participants come first.
-        bridge.args(["-p", "settle_s:=8.0"]);
+        // Authentication and key exchange between every pair of participants come first;
+        // a handshake whose messages are lost under load is retried once a second, so
+        // the first answers are waited for longer, as `tending fleet --secure` does.
+        bridge.args(["-p", "settle_s:=8.0", "-p", "startup_grace_s:=30.0"]);
         secure(&mut bridge, ks, "/tending/sim_bridge");
     }
     for e in bridge_extra {
