@@ -583,7 +583,7 @@ impl Discovery {
       builtin_topic_type_names::DCPS_PARTICIPANT_STATELESS_MESSAGE,
       ParticipantStatelessMessage,
       Some(Self::create_participant_stateless_message_qos()),
-      None, // Reader QoS: as above
+      Some(Self::participant_stateless_message_reader_qos()), // Reader QoS
       true, // Important: STATELESS RTPS Reader & Writer (see Security spec. section 7.4.3)
       EntityId::P2P_BUILTIN_PARTICIPANT_STATELESS_READER,
       P2P_PARTICIPANT_STATELESS_MESSAGE_TOKEN,
@@ -2111,6 +2111,29 @@ impl Discovery {
       .build()
   }
 
+  // QoS of the built-in ParticipantStatelessMessage DataReader: the topic QoS above
+  // with the SEDP readers' ResourceLimits.
+  //
+  // Every participant's stateless reader receives every handshake message sent in the
+  // domain (the best-effort writer sends to all matched readers; the destination is in
+  // the message), each resent once a second while unanswered. The topic's KeepLast 1
+  // on a keyless topic kept one message for all senders: messages from several
+  // participants arriving between two reads of the discovery thread (busy with
+  // handshake cryptography at start-up) were lost but the last, and each lost
+  // handshake waited for the next resend. Without ResourceLimits its DDSCache also
+  // keeps at most 64 samples, read or not (the volatile reader's failure, below). Seen
+  // as handshakes taking up to 8 s with two 6-robot secure fleets on 2 cores. History
+  // and resource limits are not part of requested/offered matching, so the wire
+  // behaviour is unchanged; the writer keeps the spec's QoS.
+  #[cfg(feature = "security")]
+  pub(crate) const fn participant_stateless_message_reader_qos() -> QosPolicies {
+    QosPolicyBuilder::new()
+      .reliability(Reliability::BestEffort)
+      .history(History::KeepAll)
+      .resource_limits(Self::SEDP_READER_RESOURCE_LIMITS)
+      .build()
+  }
+
   #[cfg(feature = "security")]
   pub const fn create_participant_volatile_message_secure_qos() -> QosPolicies {
     // See Table 18 – Non-default Qos policies for
@@ -2306,6 +2329,8 @@ mod tests {
       builtin_topic_names::DCPS_SUBSCRIPTIONS_SECURE,
       // key exchange: unread messages must outlast a start-up burst
       builtin_topic_names::DCPS_PARTICIPANT_VOLATILE_MESSAGE_SECURE,
+      // authentication handshakes: the same
+      builtin_topic_names::DCPS_PARTICIPANT_STATELESS_MESSAGE,
     ] {
       assert_eq!(max_samples(topic), 4096, "{topic} cache limit");
     }
