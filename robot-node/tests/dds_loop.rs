@@ -618,3 +618,75 @@ fn two_robots_in_one_process_share_one_reader_per_topic() {
     std::fs::remove_file(&err_path).ok();
     std::fs::remove_file(&out_path).ok();
 }
+
+/// Lockstep (docs/adr/0029-lockstep-resends.md): a robot that answered a state sends the
+/// same answer, stamped with that state, again every `lockstep_resend_s` while no newer
+/// state comes (the bridge may not have received it); with 0 it answers once. The test
+/// stands in for the bridge: it publishes one state (own pose and has_part, stamped
+/// 0.1 s) until the first answer, then only listens.
+#[test]
+fn lockstep_answer_is_resent_while_no_newer_state_comes() {
+    const STAMP_NS: i64 = 100_000_000;
+    for (i, (resend, extra_min, extra_max)) in
+        [("0.3", 2, 5), ("0.0", 0, 0)].into_iter().enumerate()
+    {
+        let d = domain(40 + i as u32);
+        let (ctx, mut node) = test_node(d, "lockstep_resend");
+        let pose_pub: Publisher<PoseStamped> =
+            publisher(&mut node, "/robot_0/pose", Profile::RobotStream);
+        let part =
+            ros::StampedWriter::<Bool>::new(&ctx, &node, "/robot_0/has_part", Profile::RobotStream)
+                .unwrap();
+        let cmd = cmd_subscription(&mut node, "/robot_0/cmd_vel");
+        let mut child = Kill(
+            robot_node(
+                d,
+                &[
+                    "-r",
+                    "__ns:=/robot_0",
+                    "-p",
+                    "lockstep:=true",
+                    "-p",
+                    &format!("lockstep_resend_s:={resend}"),
+                    "--disable-rosout-logs",
+                ],
+            )
+            .stdout(Stdio::null())
+            .stderr(Stdio::null())
+            .spawn()
+            .unwrap(),
+        );
+        let pose = PoseStamped::planar(Time::from_secs_f64(0.1), "map", 0.0, 0.0);
+        // the state until the first answer stamped with it
+        let answers = |cmd: &Subscription<Twist>| {
+            let mut n = 0;
+            while let Ok(Some((_, info))) = cmd.take() {
+                if ros::stamp_key_info(&info) == Some(STAMP_NS / 1000) {
+                    n += 1;
+                }
+            }
+            n
+        };
+        let deadline = Instant::now() + Duration::from_secs(20);
+        let mut first = 0;
+        while first == 0 {
+            assert!(
+                Instant::now() < deadline,
+                "no answer to the state (resend {resend})"
+            );
+            pose_pub.publish(pose.clone()).unwrap();
+            part.write(Bool { data: false }, Some(STAMP_NS)).unwrap();
+            std::thread::sleep(Duration::from_millis(100));
+            first = answers(&cmd);
+        }
+        // then no newer state: count the copies in the next second
+        std::thread::sleep(Duration::from_millis(1000));
+        let extra = answers(&cmd) + first - 1;
+        assert!(
+            (extra_min..=extra_max).contains(&extra),
+            "lockstep_resend_s {resend}: {extra} resent answers in 1 s, expected \
+             {extra_min}..={extra_max}"
+        );
+        let _ = child.0.kill();
+    }
+}
