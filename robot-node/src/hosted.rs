@@ -206,8 +206,8 @@ pub(crate) fn heartbeat(h: &mut Hosted, log: &NodeLoggingHandle, now: f64) {
     log_outcome(h, log, &r, "controlling");
 }
 
-/// Lockstep timing: how long a state is waited for to be complete, and how often an
-/// unanswered-looking answer is sent again (0: never).
+/// Lockstep timing: how long a state is waited for to be complete, and how often the
+/// answer to it goes out again while no newer state comes (0: never).
 #[derive(Debug, Clone, Copy)]
 pub(crate) struct LockstepTiming {
     pub(crate) wait: Duration,
@@ -218,7 +218,6 @@ pub(crate) struct LockstepTiming {
 /// (or after `t.wait`). While no newer state comes, the answer goes out again every
 /// `t.resend`: the bridge may not have received it (ADR 0029).
 pub(crate) fn lockstep_step(h: &mut Hosted, log: &NodeLoggingHandle, t: LockstepTiming, now: f64) {
-    let wait = t.wait;
     let Some(s) = h.brain.world.own_pose_stamp() else {
         return;
     };
@@ -237,7 +236,7 @@ pub(crate) fn lockstep_step(h: &mut Hosted, log: &NodeLoggingHandle, t: Lockstep
     }
     let since = pending_since(h, s);
     let missing = h.brain.world.lockstep_missing(s, h.last_acted, now);
-    let timed_out = since.elapsed() >= wait;
+    let timed_out = since.elapsed() >= t.wait;
     if missing == Some(0) || timed_out {
         if missing != Some(0) {
             h.brain.counters.lockstep_wait_timeouts += 1;
