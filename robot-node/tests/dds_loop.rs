@@ -638,7 +638,8 @@ fn lockstep_answer_is_resent_while_no_newer_state_comes() {
             ros::StampedWriter::<Bool>::new(&ctx, &node, "/robot_0/has_part", Profile::RobotStream)
                 .unwrap();
         let cmd = cmd_subscription(&mut node, "/robot_0/cmd_vel");
-        let mut child = Kill(
+        // killed when dropped, at the end of the iteration
+        let _child = Kill(
             robot_node(
                 d,
                 &[
@@ -687,6 +688,5 @@ fn lockstep_answer_is_resent_while_no_newer_state_comes() {
             "lockstep_resend_s {resend}: {extra} resent answers in 1 s, expected \
              {extra_min}..={extra_max}"
         );
-        let _ = child.0.kill();
     }
 }

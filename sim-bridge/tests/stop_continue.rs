@@ -1,7 +1,7 @@
 //! A robot_node stopped and continued (Ctrl-Z then `fg`, or a debugger attaching) keeps
 //! working. Linux makes a blocked `epoll_wait` fail with EINTR after a stop and SIGCONT,
 //! even without a signal handler; RustDDS's event loops ended on that error, and the
-//! robot went deaf and mute for good (third_party patch 0013).
+//! robot went deaf and mute for good (third_party patch 0012).
 //!
 //! A realtime bridge (setup 2.2_1, robot_1 never started, so its slot goes stale and only
 //! robot_0 stays) and one robot_node. Once robot_0 acts on state, the test stops and
@@ -17,19 +17,10 @@ use std::process::{Command, Stdio};
 use std::sync::mpsc;
 use std::time::{Duration, Instant};
 
-use lockstep_common::robot_node_bin;
+use lockstep_common::{robot_node_bin, Kill};
 
 fn domain() -> u16 {
     (std::process::id() % 40) as u16 + 180
-}
-
-/// Kills the process when dropped (also when the test panics).
-struct Killed(std::process::Child);
-impl Drop for Killed {
-    fn drop(&mut self) {
-        let _ = self.0.kill();
-        let _ = self.0.wait();
-    }
 }
 
 fn signal(pid: u32, sig: i32) {
@@ -41,32 +32,29 @@ fn signal(pid: u32, sig: i32) {
 #[test]
 fn a_robot_stopped_and_continued_keeps_commanding() {
     let d = domain().to_string();
-    let mut bridge = Killed(
-        Command::new(env!("CARGO_BIN_EXE_sim_bridge"))
-            .env("ROS_DOMAIN_ID", &d)
-            .args(["--ros-args", "-p", "setup:=2.2_1", "-p", "seed:=0"])
-            .args(["-p", "metrics_period_s:=0.2", "-p", "startup_grace_s:=3.0"])
-            .args(["--disable-rosout-logs"])
-            .stdout(Stdio::piped())
-            .stderr(Stdio::null())
-            .spawn()
-            .expect("starting sim_bridge"),
-    );
-    let robot = Killed(
-        Command::new(robot_node_bin())
-            .env("ROS_DOMAIN_ID", &d)
-            .args([
-                "--ros-args",
-                "-r",
-                "__ns:=/robot_0",
-                "--disable-rosout-logs",
-            ])
-            .stdout(Stdio::null())
-            .stderr(Stdio::null())
-            .spawn()
-            .expect("starting robot_node"),
-    );
-    let out = bridge.0.stdout.take().unwrap();
+    let mut bridge = Kill(vec![Command::new(env!("CARGO_BIN_EXE_sim_bridge"))
+        .env("ROS_DOMAIN_ID", &d)
+        .args(["--ros-args", "-p", "setup:=2.2_1", "-p", "seed:=0"])
+        .args(["-p", "metrics_period_s:=0.2", "-p", "startup_grace_s:=3.0"])
+        .args(["--disable-rosout-logs"])
+        .stdout(Stdio::piped())
+        .stderr(Stdio::null())
+        .spawn()
+        .expect("starting sim_bridge")]);
+    let robot = Kill(vec![Command::new(robot_node_bin())
+        .env("ROS_DOMAIN_ID", &d)
+        .args([
+            "--ros-args",
+            "-r",
+            "__ns:=/robot_0",
+            "--disable-rosout-logs",
+        ])
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .spawn()
+        .expect("starting robot_node")]);
+    let robot_pid = robot.0[0].id();
+    let out = bridge.0[0].stdout.take().unwrap();
     let (tx, rx) = mpsc::channel();
     std::thread::spawn(move || {
         for l in BufReader::new(out).lines().map_while(Result::ok) {
@@ -100,9 +88,9 @@ fn a_robot_stopped_and_continued_keeps_commanding() {
     }
     let before = latest(Instant::now() + Duration::from_millis(300));
     for _ in 0..5 {
-        signal(robot.0.id(), libc::SIGSTOP);
+        signal(robot_pid, libc::SIGSTOP);
         std::thread::sleep(Duration::from_millis(200));
-        signal(robot.0.id(), libc::SIGCONT);
+        signal(robot_pid, libc::SIGCONT);
         std::thread::sleep(Duration::from_millis(300));
     }
     let after = latest(Instant::now() + Duration::from_secs(3));

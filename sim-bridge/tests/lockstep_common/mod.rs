@@ -99,7 +99,9 @@ pub fn greedy_policy_actions(
         .collect()
 }
 
-struct Kill(Vec<Child>);
+/// Child processes, asked to stop (SIGTERM) then killed when dropped, also when a test
+/// panics.
+pub struct Kill(pub Vec<Child>);
 impl Drop for Kill {
     fn drop(&mut self) {
         for c in &mut self.0 {
