@@ -3,11 +3,11 @@
 //! 10's targets compare with it: where 1.1x the best script is above the bound, no policy
 //! can meet that target.
 
+use crate::records::{self, PartsBoundRecord};
 use anyhow::{Context, Result};
 use clap::Args;
 use policy::train::eval::eval_env_seed;
 use sim::{parts_bound, Env};
-use std::fmt::Write as _;
 use std::path::PathBuf;
 
 #[derive(Args, Debug)]
@@ -27,7 +27,7 @@ pub fn run(a: BoundArgs) -> Result<()> {
     let (setups, seeds) = a.runs.parse()?;
     let episodes = a.runs.episodes;
     let per_machine = cfg.world.episode_steps.div_ceil(cfg.task.prep_steps.max(1));
-    let mut csv = String::from("setup,seed,episodes,parts_bound,machine_bound,robot_bound,p_max\n");
+    let mut rows = vec![];
     println!("setup      bound (mean over seeds; machines / robots)   P_max");
     for &setup in &setups {
         let p_max = (setup.machines as u32 * per_machine) as f64;
@@ -43,11 +43,15 @@ pub fn run(a: BoundArgs) -> Result<()> {
                 sum[2] += b.robots as u64;
             }
             let mean = sum.map(|s| s as f64 / episodes as f64);
-            writeln!(
-                csv,
-                "{setup},{seed},{},{},{},{},{p_max}",
-                episodes, mean[0], mean[1], mean[2]
-            )?;
+            rows.push(PartsBoundRecord {
+                setup: setup.to_string(),
+                seed,
+                episodes,
+                parts_bound: mean[0],
+                machine_bound: mean[1],
+                robot_bound: mean[2],
+                p_max,
+            });
             for k in 0..3 {
                 all[k] += mean[k] / seeds.len() as f64;
             }
@@ -62,7 +66,8 @@ pub fn run(a: BoundArgs) -> Result<()> {
         );
     }
     if let Some(out) = &a.out {
-        std::fs::write(out, csv).with_context(|| format!("write {}", out.display()))?;
+        std::fs::write(out, records::to_text(&rows)?)
+            .with_context(|| format!("write {}", out.display()))?;
         eprintln!("wrote {}", out.display());
     }
     Ok(())

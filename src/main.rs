@@ -10,6 +10,7 @@ mod eval_cmd;
 mod fleet;
 mod plot;
 mod plot_cmd;
+mod plot_limits;
 mod plot_pareto;
 mod records;
 mod render;

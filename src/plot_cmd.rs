@@ -45,6 +45,9 @@ pub enum PlotKind {
     Curves(CurvesArgs),
     /// Parts vs contacts per robot-step, a panel per setup, a point per eval results.csv.
     Pareto(crate::plot_pareto::ParetoArgs),
+    /// Parts as a multiple of the best script's per setup, with the target and the ceiling
+    /// the parts bound puts on any controller (issue 10).
+    Limits(crate::plot_limits::LimitsArgs),
 }
 
 #[derive(Args, Debug)]
@@ -96,6 +99,7 @@ pub fn run(a: PlotArgs) -> Result<()> {
         PlotKind::Bars(b) => run_bars(&b),
         PlotKind::Curves(c) => run_curves(&c),
         PlotKind::Pareto(p) => crate::plot_pareto::run(&p),
+        PlotKind::Limits(l) => crate::plot_limits::run(&l),
     }
 }
 

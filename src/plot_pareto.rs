@@ -4,7 +4,7 @@
 
 use crate::chart;
 use crate::records::{self, EvalResultRecord};
-use anyhow::{anyhow, bail, Result};
+use anyhow::{anyhow, Result};
 use clap::Args;
 use plotters::prelude::*;
 use std::collections::BTreeMap;
@@ -28,15 +28,15 @@ pub struct ParetoArgs {
     pub sweep: bool,
 }
 
-/// (method, setup) -> (mean parts, mean contacts per robot-step) over the file's rows.
+/// setup -> method -> (mean parts, mean contacts per robot-step) over the method's rows.
 type Points = BTreeMap<String, BTreeMap<String, (f64, f64)>>;
 
 fn read(files: &[PathBuf]) -> Result<(Vec<String>, Points)> {
-    let mut methods = vec![];
-    let mut pts: Points = BTreeMap::new();
+    let mut methods: Vec<String> = vec![];
+    // (setup, method) -> sums of parts and contacts, and rows: a method's rows may be spread
+    // over several files (one per group of setups, as in docs/safety).
+    let mut sums: BTreeMap<(String, String), (f64, f64, f64)> = BTreeMap::new();
     for f in files {
-        let mut sums: BTreeMap<String, (f64, f64, f64)> = BTreeMap::new();
-        let mut method = None;
         for records::Line { line, record: row } in records::read::<EvalResultRecord>(f)? {
             let contacts = row.contacts_per_robot_step.ok_or_else(|| {
                 anyhow!(
@@ -45,23 +45,42 @@ fn read(files: &[PathBuf]) -> Result<(Vec<String>, Points)> {
                     f.display()
                 )
             })?;
-            method.get_or_insert(row.policy.clone());
-            let e = sums.entry(row.setup).or_default();
+            let m = row.policy;
+            if !methods.contains(&m) {
+                methods.push(m.clone());
+            }
+            let e = sums.entry((row.setup, m)).or_default();
             *e = (e.0 + row.parts_delivered, e.1 + contacts, e.2 + 1.0);
         }
-        let Some(m) = method else {
-            bail!("{}: no data rows", f.display());
-        };
-        // Short names: the checkpoint file in parentheses is the same for all learned rows.
-        let m = m.split(" (").next().unwrap_or(&m).to_string();
-        for (setup, (p, c, n)) in sums {
-            pts.entry(setup)
-                .or_default()
-                .insert(m.clone(), (p / n, c / n));
-        }
-        methods.push(m);
     }
-    Ok((methods, pts))
+    let labels = short_names(&methods);
+    let label = |m: &str| labels[methods.iter().position(|x| x == m).unwrap_or(0)].clone();
+    let mut pts: Points = BTreeMap::new();
+    for ((setup, m), (p, c, n)) in sums {
+        pts.entry(setup)
+            .or_default()
+            .insert(label(&m), (p / n, c / n));
+    }
+    Ok((labels, pts))
+}
+
+/// The names to show for methods (the `policy` column of results.csv): without the
+/// checkpoint file in parentheses, unless two methods differ only in it (the bundled
+/// policy and matching-ORCA's always-"matched" checkpoint are both `smappo targets+orca`).
+pub(crate) fn short_names(methods: &[String]) -> Vec<String> {
+    let short = |m: &str| m.split(" (").next().unwrap_or(m).to_string();
+    methods
+        .iter()
+        .map(|m| {
+            let s = short(m);
+            let clash = methods.iter().any(|o| o != m && short(o) == s);
+            if clash {
+                m.clone()
+            } else {
+                s
+            }
+        })
+        .collect()
 }
 
 /// Twelve colours far enough apart to tell methods apart (an ablation has many).
@@ -250,6 +269,28 @@ mod tests {
         let (methods, pts) = read(&[a.clone(), b.clone()]).unwrap();
         assert_eq!(methods, ["greedy", "smappo"]);
         assert_eq!(pts["6.4_2"]["greedy"], (25.0, 0.02));
+        // A method's rows in a second file are the same method, averaged with the first's.
+        let a2 = dir.join("a2.csv");
+        write(&a2, &[row("greedy", 2, 40.0, 0.05)]);
+        let (methods, pts) = read(&[a.clone(), b.clone(), a2]).unwrap();
+        assert_eq!(methods, ["greedy", "smappo"]);
+        assert_eq!(pts["6.4_2"]["greedy"].0, 30.0);
+        // Two checkpoints of one kind keep their file names apart.
+        let names = short_names(&[
+            "smappo targets+orca (a.safetensors)".into(),
+            "smappo targets+orca (b.safetensors)".into(),
+            "smappo+orca (a.safetensors)".into(),
+            "greedy".into(),
+        ]);
+        assert_eq!(
+            names,
+            [
+                "smappo targets+orca (a.safetensors)",
+                "smappo targets+orca (b.safetensors)",
+                "smappo+orca",
+                "greedy"
+            ]
+        );
         let out = dir.join("p.png");
         run(&ParetoArgs {
             files: vec![a, b],

@@ -4,16 +4,19 @@
 //! * [`TrainLogRecord`]: a training run's `log.csv` (`tending train`, `tending plot curves`).
 //! * [`EvalResultRecord`]: `tending eval`'s `results.csv` (`tending plot bars|pareto`).
 //! * [`PaperMuRecord`]: the paper's MU values (`bench/experiments/paper_mu.csv`).
+//! * [`PartsBoundRecord`]: `tending bound`'s `bound.csv` (`tending plot limits`).
 //!
 //! Columns added by later versions are `Option`s, so files already committed (docs/,
 //! policy/pretrained/) still read; the tests beside each record read them.
 
 mod eval_results;
 mod paper_mu;
+mod parts_bound;
 mod train_log;
 
 pub use eval_results::EvalResultRecord;
 pub use paper_mu::PaperMuRecord;
+pub use parts_bound::PartsBoundRecord;
 pub use train_log::TrainLogRecord;
 
 use anyhow::{anyhow, bail, Result};

@@ -1,0 +1,25 @@
+#!/usr/bin/env bash
+# Issue 10's two closing figures, from the committed evaluation files (no new runs):
+#   docs/safety/limits.png   every method's parts / the best script's, per setup, with the
+#                            1.1x target and the parts bound's ceiling (`tending plot limits`);
+#   docs/safety/pareto28.png parts vs contacts per robot-step on all 28 setups
+#                            (`tending plot pareto`).
+# Methods: greedy, greedy-ORCA, matching-ORCA (the always-"matched" script) and the
+# bundled policy, seeds 0-2 x 50 episodes each (docs/RESULTS.md 7.16, 7.18).
+set -euo pipefail
+cd "$(dirname "$0")/../.."
+bin="${TENDING_BIN:-target/release/tending}"
+s=docs/safety
+groups=(eval eval_extra eval_wide)
+files=()
+for m in greedy greedy-orca; do
+    for g in "${groups[@]}"; do files+=("$s/$g/$m/results.csv"); done
+done
+files+=("$s/matching/matching-orca/results.csv")
+for g in "${groups[@]}"; do files+=("$s/$g/targets/results.csv"); done
+bounds=()
+for g in "${groups[@]}"; do bounds+=("$s/$g/bound.csv"); done
+"$bin" plot limits "${files[@]}" --bound "${bounds[@]}" --out "$s/limits.png"
+"$bin" plot pareto "${files[@]}" --out "$s/pareto28.png" \
+    --title "parts vs contacts per robot-step, 28 setups (seeds 0-2 x 50 episodes)"
+echo "wrote $s/limits.png $s/pareto28.png"
