@@ -127,7 +127,7 @@ fn columns(a: &LimitsArgs) -> Result<(Vec<String>, Vec<Column>)> {
                  to --bound)"
             );
         };
-        if !(best > 0.0) {
+        if best.is_nan() || best <= 0.0 {
             continue; // no script ran here: nothing to compare with
         }
         cols.push(Column {
