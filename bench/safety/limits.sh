@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
-# Issue 10's two closing figures, from the committed evaluation files (no new runs):
+# Issue 10's closing figures and table, from the committed evaluation files (no new runs):
 #   docs/safety/limits.png   every method's parts / the best script's, per setup, with the
 #                            1.1x target and the parts bound's ceiling (`tending plot limits`);
+#   docs/safety/limits.md    the same as a table (bench/safety/limits_table.py);
 #   docs/safety/pareto28.png parts vs contacts per robot-step on all 28 setups
 #                            (`tending plot pareto`).
 # Methods: greedy, greedy-ORCA, matching-ORCA (the always-"matched" script) and the
@@ -20,6 +21,8 @@ for g in "${groups[@]}"; do files+=("$s/$g/targets/results.csv"); done
 bounds=()
 for g in "${groups[@]}"; do bounds+=("$s/$g/bound.csv"); done
 "$bin" plot limits "${files[@]}" --bound "${bounds[@]}" --out "$s/limits.png"
+python3 bench/safety/limits_table.py "$s/eval" "$s/eval_extra" "$s/eval_wide" \
+    --matching "$s/matching/matching-orca/results.csv" > "$s/limits.md"
 "$bin" plot pareto "${files[@]}" --out "$s/pareto28.png" \
     --title "parts vs contacts per robot-step, 28 setups (seeds 0-2 x 50 episodes)"
-echo "wrote $s/limits.png $s/pareto28.png"
+echo "wrote $s/limits.png $s/limits.md $s/pareto28.png"
