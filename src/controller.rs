@@ -20,6 +20,8 @@ pub struct CheckpointFlags {
     pub clearance: f32,
     /// Peer clearance of the ORCA filter at rest, m (at most `clearance`).
     pub rest_clearance: f32,
+    /// The ORCA filter's horizon for boxes and walls, s.
+    pub obstacle_horizon: f32,
 }
 
 /// A clearance in whole millimetres, for method names.
@@ -47,9 +49,9 @@ pub fn checkpoint(path: &Path, f: &CheckpointFlags) -> Result<(Controller, Strin
     let orca_filter =
         f.orca_filter || (pol.trained_with_orca_filter() && !f.shield && !f.no_orca_filter);
     let targets = pol.actor().arch.actions == policy::ActionSpace::Targets;
-    // Clearances other than the deployed ones are part of the method's name (sweeps).
+    // Margins other than the deployed ones are part of the method's name (sweeps).
     let rest = f.rest_clearance.min(f.clearance);
-    let margin = if orca_filter
+    let mut margin = if orca_filter
         && (f.clearance != obs::orca::FILTER_CLEARANCE
             || rest != obs::orca::FILTER_REST_CLEARANCE.min(f.clearance))
     {
@@ -57,6 +59,9 @@ pub fn checkpoint(path: &Path, f: &CheckpointFlags) -> Result<(Controller, Strin
     } else {
         String::new()
     };
+    if orca_filter && f.obstacle_horizon != obs::orca::FILTER_OBSTACLE_HORIZON {
+        margin = format!(" obstacles {} s{margin}", f.obstacle_horizon);
+    }
     let label = format!(
         "{}{}{}{margin} ({})",
         pol.kind(),
@@ -82,6 +87,7 @@ pub fn checkpoint(path: &Path, f: &CheckpointFlags) -> Result<(Controller, Strin
             sample,
             clearance: f.clearance,
             rest_clearance: f.rest_clearance,
+            obstacle_horizon: f.obstacle_horizon,
         }
     } else {
         Controller::Learned { actor, sample }

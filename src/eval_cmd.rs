@@ -46,9 +46,15 @@ pub struct EvalArgs {
     /// --filter-clearance, a point of the safety margin's sweep (docs/RESULTS.md 7.7).
     #[arg(long, default_value_t = obs::orca::FILTER_REST_CLEARANCE)]
     pub filter_rest_clearance: f32,
+    /// The ORCA filter's horizon for boxes and walls, s (docs/adr/0030).
+    #[arg(long, default_value_t = obs::orca::FILTER_OBSTACLE_HORIZON)]
+    pub filter_obstacle_horizon: f32,
     /// greedy-ORCA's own peer clearance, m (with --policy greedy-orca).
     #[arg(long, default_value_t = obs::orca::GREEDY_ORCA_CLEARANCE)]
     pub script_clearance: f32,
+    /// greedy-ORCA's horizon for boxes and walls, s (with --policy greedy-orca).
+    #[arg(long, default_value_t = obs::orca::OBSTACLE_HORIZON)]
+    pub script_obstacle_horizon: f32,
     /// Scenario config (TOML); default: the simulator's defaults.
     #[arg(long)]
     pub scenario: Option<PathBuf>,
@@ -92,6 +98,20 @@ impl Runs {
     }
 }
 
+/// greedy-ORCA's name with margins other than its defaults: "greedy-orca 30 mm" (a point
+/// of the clearance sweep, which `tending plot pareto --sweep` joins by the "mm" ending),
+/// "greedy-orca obstacles 0.15 s", or both.
+fn script_label(clearance: f32, obstacle_horizon: f32) -> String {
+    let mut s = String::from("greedy-orca");
+    if obstacle_horizon != obs::orca::OBSTACLE_HORIZON {
+        s += &format!(" obstacles {obstacle_horizon} s");
+    }
+    if clearance != obs::orca::GREEDY_ORCA_CLEARANCE {
+        s += &format!(" {} mm", crate::controller::mm(clearance));
+    }
+    s
+}
+
 pub fn run(a: EvalArgs) -> Result<()> {
     for (name, v) in [
         ("--filter-clearance", a.filter_clearance),
@@ -102,10 +122,21 @@ pub fn run(a: EvalArgs) -> Result<()> {
             bail!("{name} {v}: must be a positive number of metres");
         }
     }
-    if a.script_clearance != obs::orca::GREEDY_ORCA_CLEARANCE
-        && a.policy.as_deref() != Some("greedy-orca")
-    {
-        bail!("--script-clearance is greedy-ORCA's: pass it with --policy greedy-orca");
+    for (name, v) in [
+        ("--filter-obstacle-horizon", a.filter_obstacle_horizon),
+        ("--script-obstacle-horizon", a.script_obstacle_horizon),
+    ] {
+        if !(v.is_finite() && v > 0.0) {
+            bail!("{name} {v}: must be a positive number of seconds");
+        }
+    }
+    let script_default = a.script_clearance == obs::orca::GREEDY_ORCA_CLEARANCE
+        && a.script_obstacle_horizon == obs::orca::OBSTACLE_HORIZON;
+    if !script_default && a.policy.as_deref() != Some("greedy-orca") {
+        bail!(
+            "--script-clearance and --script-obstacle-horizon are greedy-ORCA's: pass them \
+             with --policy greedy-orca"
+        );
     }
     let (ctrl, label) = match (&a.checkpoint, a.policy.as_deref()) {
         (Some(p), None) => {
@@ -116,17 +147,16 @@ pub fn run(a: EvalArgs) -> Result<()> {
                 no_orca_filter: a.no_orca_filter,
                 clearance: a.filter_clearance,
                 rest_clearance: a.filter_rest_clearance,
+                obstacle_horizon: a.filter_obstacle_horizon,
             };
             crate::controller::checkpoint(p, &flags)?
         }
-        (None, Some("greedy-orca")) if a.script_clearance != obs::orca::GREEDY_ORCA_CLEARANCE => (
+        (None, Some("greedy-orca")) if !script_default => (
             policy::train::Controller::GreedyOrca {
                 clearance: a.script_clearance,
+                obstacle_horizon: a.script_obstacle_horizon,
             },
-            format!(
-                "greedy-orca {} mm",
-                crate::controller::mm(a.script_clearance)
-            ),
+            script_label(a.script_clearance, a.script_obstacle_horizon),
         ),
         (None, Some(name)) => (crate::controller::scripted(name)?, name.to_string()),
         (None, None) => bail!("pass --checkpoint <file> or --policy greedy|greedy-orca|random"),

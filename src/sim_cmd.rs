@@ -67,6 +67,7 @@ fn controller(a: &SimArgs) -> Result<(Controller, String)> {
         no_orca_filter: false,
         clearance: obs::orca::FILTER_CLEARANCE,
         rest_clearance: obs::orca::FILTER_REST_CLEARANCE,
+        obstacle_horizon: obs::orca::FILTER_OBSTACLE_HORIZON,
     };
     crate::controller::checkpoint(path, &flags)
 }

@@ -36,6 +36,9 @@ pub struct Params {
     /// Peer clearance of that filter at rest, m (`obs::orca::FILTER_REST_CLEARANCE`, what
     /// the policy is evaluated with; 0.035 is ADR 0017's more conservative margin).
     pub orca_rest_clearance: f64,
+    /// That filter's horizon for boxes and walls, s (`obs::orca::FILTER_OBSTACLE_HORIZON`,
+    /// ADR 0030; greedy-orca keeps `obs::orca::OBSTACLE_HORIZON`).
+    pub orca_obstacle_horizon: f64,
     /// Pick/place reach beyond the robot radius (greedy-orca stops within it); default:
     /// `robot_radius` (the simulator's default reach equals its radius at every scale).
     pub reach: Option<f64>,
@@ -115,6 +118,7 @@ impl Default for Params {
             orca_filter: None,
             orca_clearance: obs::orca::FILTER_CLEARANCE as f64,
             orca_rest_clearance: obs::orca::FILTER_REST_CLEARANCE as f64,
+            orca_obstacle_horizon: obs::orca::FILTER_OBSTACLE_HORIZON as f64,
             reach: None,
             control_rate_hz: 10.0,
             use_sim_time: false,
@@ -151,7 +155,7 @@ impl Params {
 pub const USAGE: &str = "usage: robot_node [--ros-args -r __ns:=/robot_N [-r __node:=NAME] \
 [-p NAME:=VALUE]... [--params-file FILE.yaml]... [--log-level LEVEL]]
 parameters: policy (path), controller (greedy|greedy-orca|policy), shield (false), orca_filter (true unless shield:=true), orca_clearance (0.04 m at full speed), orca_rest_clearance (0.03 m at rest),
-            control_rate_hz (10),
+            orca_obstacle_horizon (0.15 s), control_rate_hz (10),
             use_sim_time (false), reach (= robot_radius),
             k_speed (0.5), prep_steps (20), stale_timeout_s (1.0), static_stale_timeout_s (= stale_timeout_s, <=0 off),
             room_margin (0.25), stats_period_s (10), discovery_period_s (0.5),
@@ -212,6 +216,7 @@ fn apply_param(p: &mut Params, name: &str, v: &ParamValue) -> Result<bool, ArgEr
         "reach" => p.reach = Some(positive(name, v)?),
         "orca_clearance" => p.orca_clearance = positive(name, v)?,
         "orca_rest_clearance" => p.orca_rest_clearance = positive(name, v)?,
+        "orca_obstacle_horizon" => p.orca_obstacle_horizon = positive(name, v)?,
         "control_rate_hz" => p.control_rate_hz = rate_hz(name, v)?,
         "use_sim_time" => p.use_sim_time = boolean(name, v)?,
         "k_speed" => p.k_speed = positive(name, v)?,
@@ -431,10 +436,13 @@ mod tests {
             "reach:=0.05",
             "-p",
             "orca_rest_clearance:=0.035",
+            "-p",
+            "orca_obstacle_horizon:=0.3",
         ]);
         assert_eq!(p.controller, ControllerKind::GreedyOrca);
         assert_eq!(p.reach, Some(0.05));
         assert_eq!(p.orca_rest_clearance, 0.035);
+        assert_eq!(p.orca_obstacle_horizon, 0.3);
         assert!(!p.shield);
         let p = parse_ok(&[
             "--ros-args",
@@ -450,6 +458,7 @@ mod tests {
             "reach:=-1",
             "controller:=orca",
             "orca_rest_clearance:=0",
+            "orca_obstacle_horizon:=-0.1",
         ] {
             let e = parse(["--ros-args", "-p", bad].iter().copied(), None).unwrap_err();
             let name = bad.split(":=").next().unwrap();

@@ -50,6 +50,7 @@ pub fn make_controller(p: &Params) -> anyhow::Result<(Box<dyn Controller>, f64)>
             let base = crate::controller::orca_params(p);
             let op = if filter_on {
                 base.for_policy_filter(p.orca_clearance as f32, p.orca_rest_clearance as f32)
+                    .with_obstacle_horizon(p.orca_obstacle_horizon as f32)
             } else {
                 base.for_policy(None)
             };

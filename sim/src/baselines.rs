@@ -75,19 +75,33 @@ impl GreedyOrcaFleet {
         Self::with_params(env, p)
     }
 
-    /// [`Self::new_filter`] with the filter's full-speed and rest clearances given
-    /// ([`obs::orca::OrcaParams::for_policy_filter`]).
-    pub fn new_filter_with(env: &Env, clearance: f32, rest: f32) -> Result<Self, SimError> {
-        let p = orca_params(env.sizes(), env.config()).for_policy_filter(clearance, rest);
+    /// [`Self::new_filter`] with the filter's full-speed and rest clearances and its
+    /// obstacle horizon given ([`obs::orca::OrcaParams::for_policy_filter`]).
+    pub fn new_filter_with(
+        env: &Env,
+        clearance: f32,
+        rest: f32,
+        obstacle_horizon: f32,
+    ) -> Result<Self, SimError> {
+        let p = orca_params(env.sizes(), env.config())
+            .for_policy_filter(clearance, rest)
+            .with_obstacle_horizon(obstacle_horizon);
         Self::with_params(env, p)
     }
 
-    /// Greedy-ORCA with its peer clearance set (`obs::orca::GREEDY_ORCA_CLEARANCE` is
+    /// Greedy-ORCA with its peer clearance and obstacle horizon set
+    /// (`obs::orca::GREEDY_ORCA_CLEARANCE` and `obs::orca::OBSTACLE_HORIZON` are
     /// [`Self::new`]'s).
-    pub fn with_clearance(env: &Env, clearance: f32) -> Result<Self, SimError> {
+    pub fn with_margins(
+        env: &Env,
+        clearance: f32,
+        obstacle_horizon: f32,
+    ) -> Result<Self, SimError> {
         Self::with_params(
             env,
-            orca_params(env.sizes(), env.config()).with_clearance(clearance),
+            orca_params(env.sizes(), env.config())
+                .with_clearance(clearance)
+                .with_obstacle_horizon(obstacle_horizon),
         )
     }
 

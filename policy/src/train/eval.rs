@@ -34,21 +34,28 @@ pub enum Controller {
         /// ORCA peer clearance at rest, m, at most `clearance`
         /// (`obs::orca::FILTER_REST_CLEARANCE` by default).
         rest_clearance: f32,
+        /// ORCA horizon for boxes and walls, s (`obs::orca::FILTER_OBSTACLE_HORIZON` by
+        /// default).
+        obstacle_horizon: f32,
     },
     Greedy,
     /// Greedy task allocation + ORCA avoidance (`obs::orca`), continuous velocities.
     GreedyOrca {
         /// Peer clearance, m (`obs::orca::GREEDY_ORCA_CLEARANCE` by default).
         clearance: f32,
+        /// Horizon for boxes and walls, s (`obs::orca::OBSTACLE_HORIZON` by default).
+        obstacle_horizon: f32,
     },
     Random,
 }
 
 impl Controller {
-    /// Greedy-ORCA at its own clearance (`obs::orca::GREEDY_ORCA_CLEARANCE`).
+    /// Greedy-ORCA at its own clearance and obstacle horizon
+    /// (`obs::orca::GREEDY_ORCA_CLEARANCE`, `obs::orca::OBSTACLE_HORIZON`).
     pub fn greedy_orca() -> Self {
         Controller::GreedyOrca {
             clearance: obs::orca::GREEDY_ORCA_CLEARANCE,
+            obstacle_horizon: obs::orca::OBSTACLE_HORIZON,
         }
     }
 
@@ -65,14 +72,15 @@ impl Controller {
         Ok(Self::filtered(Box::new(pol.actor().clone()), false))
     }
 
-    /// `actor` behind the ORCA filter at the clearances it was trained and is deployed
-    /// with (`obs::orca::FILTER_CLEARANCE`, `obs::orca::FILTER_REST_CLEARANCE`).
+    /// `actor` behind the ORCA filter as it is deployed (`obs::orca::FILTER_CLEARANCE`,
+    /// `obs::orca::FILTER_REST_CLEARANCE`, `obs::orca::FILTER_OBSTACLE_HORIZON`).
     pub fn filtered(actor: Box<Actor>, sample: bool) -> Self {
         Controller::Filtered {
             actor,
             sample,
             clearance: obs::orca::FILTER_CLEARANCE,
             rest_clearance: obs::orca::FILTER_REST_CLEARANCE,
+            obstacle_horizon: obs::orca::FILTER_OBSTACLE_HORIZON,
         }
     }
 }
@@ -140,17 +148,24 @@ pub fn run_episode_hooked(
         ));
     }
     let mut orca = match ctrl {
-        Controller::GreedyOrca { clearance } => {
-            Some(GreedyOrcaFleet::with_clearance(&env, *clearance)?)
-        }
+        Controller::GreedyOrca {
+            clearance,
+            obstacle_horizon,
+        } => Some(GreedyOrcaFleet::with_margins(
+            &env,
+            *clearance,
+            *obstacle_horizon,
+        )?),
         Controller::Filtered {
             clearance,
             rest_clearance,
+            obstacle_horizon,
             ..
         } => Some(GreedyOrcaFleet::new_filter_with(
             &env,
             *clearance,
             *rest_clearance,
+            *obstacle_horizon,
         )?),
         // Without the filter a target policy still plans with the policy's parameters.
         Controller::Learned { .. } if targets => Some(GreedyOrcaFleet::new_filter(&env, None)?),

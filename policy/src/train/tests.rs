@@ -782,6 +782,7 @@ fn target_actions_contain_greedy_orca() {
         sample: false,
         clearance: obs::orca::GREEDY_ORCA_CLEARANCE,
         rest_clearance: obs::orca::FILTER_REST_CLEARANCE,
+        obstacle_horizon: obs::orca::OBSTACLE_HORIZON,
     };
     // greedy-ORCA as `tending eval` runs it, but planning with the policy's parameters.
     let script = |ep: u64| {
