@@ -6,8 +6,9 @@ policy is from the target. The same numbers as docs/safety/limits.png, as a tabl
 A setup is "balanced" when the bound is within 1.2x the best script: there the target asks
 for nearly every part the layout allows. Elsewhere (few robots, or few storages for the
 fleet) the bound is loose, because it ignores the storage queues and the robots' time.
-usage: limits_table.py EVAL_DIR... [--matching RESULTS_CSV] > limits.md
-(each EVAL_DIR holds targets/, greedy/, greedy-orca/ and bound.csv)
+usage: limits_table.py EVAL_DIR... [--compare NAME=RESULTS_CSV]... > limits.md
+(each EVAL_DIR holds targets/, greedy/, greedy-orca/ and bound.csv; each --compare adds a
+column NAME / best script, e.g. matching-ORCA or greedy-ORCA at another margin)
 """
 import csv
 import statistics
@@ -31,10 +32,11 @@ def key(setup):
 
 
 def main(args):
-    matching = None
-    if "--matching" in args:
-        i = args.index("--matching")
-        matching = load(args[i + 1])
+    compare = []  # (name, {setup: parts})
+    while "--compare" in args:
+        i = args.index("--compare")
+        name, path = args[i + 1].split("=", 1)
+        compare.append((name, load(path)))
         args = args[:i] + args[i + 2:]
     pol, greedy, orca, bound = {}, {}, {}, {}
     for d in args:
@@ -43,8 +45,8 @@ def main(args):
         orca.update(load(f"{d}/greedy-orca/results.csv"))
         bound.update(load(f"{d}/bound.csv", "parts_bound"))
     head = "| setup | class | best script / bound | policy / bound | 1.1x / bound | ceiling (bound / best script) | policy / best script | parts per episode short of 1.1x |"
-    if matching:
-        head += " matching-ORCA / best script |"
+    for name, _ in compare:
+        head += f" {name} / best script |"
     print(head)
     print("|" + "---|" * (head.count("|") - 1))
     counts = {}
@@ -60,8 +62,8 @@ def main(args):
         counts[cls][1] += 1
         row = (f"| {s} | {cls} | {best / b:.3f} | {pol[s] / b:.3f} | {TARGET * best / b:.3f} | "
                f"{ceiling:.2f} | {pol[s] / best:.3f} | {'met' if met else f'{short:.1f}'} |")
-        if matching:
-            row += f" {matching[s] / best:.3f} |"
+        for _, parts in compare:
+            row += f" {parts[s] / best:.3f} |" if s in parts else " - |"
         print(row)
     print()
     for cls, (met, n) in counts.items():
