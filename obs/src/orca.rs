@@ -64,7 +64,8 @@ pub const OBSTACLE_HORIZON: f32 = 0.3;
 /// stand-off inside reach of its box, and the pick or place happens as it crosses the
 /// reach, so braking 0.15 m out only delays every arrival. Tuned on seed 7 x 20 episodes
 /// (not the evaluation seeds 0-2), the bundled policy, 28 setups: 0.1 s 1.012x the parts
-/// of 0.3 s, 0.15 s 1.018x, 0.2 s 1.016x; at 0.1 s contact steps rose to 10-50 per
+/// of 0.3 s, 0.15 s 1.018x, 0.2 s 1.016x (0.12 s and 0.18 s 0.999x and 0.996x of 0.15 s);
+/// at 0.1 s contact steps rose to 10-50 per
 /// episode on the crowded setups (100.50_10 1.9 -> 50.1), at 0.15 s to at most 6.8
 /// (90.20_3, 2.4 before), below greedy-ORCA's on all but 8.6_3 and 16.4_1 (0.2 and 0.1
 /// to 0.0). docs/adr/0030-filter-obstacle-horizon.md.
