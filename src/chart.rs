@@ -24,6 +24,33 @@ pub const TICK: u32 = 13;
 pub const INK: RGBColor = RGBColor(20, 20, 20);
 pub const GRID: RGBColor = RGBColor(225, 225, 225);
 
+/// Twelve colours far enough apart to tell methods apart (an ablation has many).
+pub const PALETTE: [RGBColor; 12] = [
+    RGBColor(200, 40, 40),
+    RGBColor(230, 140, 20),
+    RGBColor(40, 90, 200),
+    RGBColor(30, 150, 60),
+    RGBColor(140, 60, 170),
+    RGBColor(90, 90, 90),
+    RGBColor(0, 170, 190),
+    RGBColor(240, 60, 170),
+    RGBColor(150, 110, 40),
+    RGBColor(120, 190, 40),
+    RGBColor(20, 30, 100),
+    RGBColor(250, 200, 30),
+];
+
+/// The label of x tick `v` on a category axis (category i centred at x = i): the i-th
+/// name at whole numbers, nothing between them.
+pub fn category_label(names: &[String], v: f64) -> String {
+    let i = v.round();
+    if (v - i).abs() < 1e-6 && i >= 0.0 {
+        names.get(i as usize).cloned().unwrap_or_default()
+    } else {
+        String::new()
+    }
+}
+
 /// Register the bundled font with plotters (once per process; before drawing any text).
 pub fn init() {
     static ONCE: Once = Once::new();

@@ -143,22 +143,10 @@ fn columns(a: &LimitsArgs) -> Result<(Vec<String>, Vec<Column>)> {
     if cols.is_empty() {
         bail!("no setup has both a script's results and a bound");
     }
-    cols.sort_by_key(|c| setup_key(&c.setup));
+    cols.sort_by_key(|c| crate::plot_pareto::setup_key(&c.setup));
     Ok((methods, cols))
 }
 
-fn setup_key(s: &str) -> Vec<u64> {
-    s.split(['.', '_']).filter_map(|x| x.parse().ok()).collect()
-}
-
-const COLOURS: [RGBColor; 6] = [
-    RGBColor(150, 150, 150),
-    RGBColor(40, 90, 200),
-    RGBColor(30, 150, 60),
-    RGBColor(230, 140, 20),
-    RGBColor(140, 60, 170),
-    RGBColor(0, 170, 190),
-];
 const TARGET: RGBColor = RGBColor(200, 40, 40);
 
 pub fn run(a: &LimitsArgs) -> Result<()> {
@@ -194,14 +182,7 @@ fn draw<DB: DrawingBackend>(
         .bold_line_style(chart::GRID)
         .disable_x_mesh()
         .x_labels(n)
-        .x_label_formatter(&|v| {
-            let i = v.round();
-            if (v - i).abs() < 1e-6 && i >= 0.0 {
-                names.get(i as usize).cloned().unwrap_or_default()
-            } else {
-                String::new()
-            }
-        })
+        .x_label_formatter(&|v| chart::category_label(&names, *v))
         .x_label_style(
             (chart::FONT, chart::TICK)
                 .into_font()
@@ -249,7 +230,8 @@ fn draw<DB: DrawingBackend>(
     // Methods side by side within a column.
     let k = methods.len().max(1) as f64;
     for (mi, m) in methods.iter().enumerate() {
-        let col = COLOURS[mi % COLOURS.len()];
+        // the palette's red is the target line's
+        let col = chart::PALETTE[(mi + 1) % chart::PALETTE.len()];
         let dx = (mi as f64 - (k - 1.0) / 2.0) * 0.12;
         let pts = cols.iter().enumerate().filter_map(|(i, c)| {
             let r = c.ratios.iter().find(|(x, _)| x == m)?.1;

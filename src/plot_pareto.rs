@@ -83,27 +83,13 @@ pub(crate) fn short_names(methods: &[String]) -> Vec<String> {
         .collect()
 }
 
-/// Twelve colours far enough apart to tell methods apart (an ablation has many).
-const COLOURS: [RGBColor; 12] = [
-    RGBColor(200, 40, 40),
-    RGBColor(230, 140, 20),
-    RGBColor(40, 90, 200),
-    RGBColor(30, 150, 60),
-    RGBColor(140, 60, 170),
-    RGBColor(90, 90, 90),
-    RGBColor(0, 170, 190),
-    RGBColor(240, 60, 170),
-    RGBColor(150, 110, 40),
-    RGBColor(120, 190, 40),
-    RGBColor(20, 30, 100),
-    RGBColor(250, 200, 30),
-];
+const COLOURS: [RGBColor; 12] = chart::PALETTE;
 
 /// Legend entries per row of the figure's one legend, and the height of a row.
 const LEGEND_COLS: usize = 3;
 const LEGEND_ROW: u32 = 24;
 
-fn setup_key(s: &str) -> Vec<u64> {
+pub(crate) fn setup_key(s: &str) -> Vec<u64> {
     s.split(['.', '_']).filter_map(|x| x.parse().ok()).collect()
 }
 

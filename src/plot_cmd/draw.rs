@@ -175,14 +175,7 @@ impl Bars<'_> {
             .bold_line_style(chart::GRID)
             .disable_x_mesh()
             .x_labels(n)
-            .x_label_formatter(&|v| {
-                let i = v.round();
-                if (v - i).abs() < 1e-6 && i >= 0.0 {
-                    setups.get(i as usize).cloned().unwrap_or_default()
-                } else {
-                    String::new()
-                }
-            })
+            .x_label_formatter(&|v| chart::category_label(setups, *v))
             .x_desc("setup (robots.machines_storages)")
             .y_desc(self.ylabel)
             .axis_desc_style((chart::FONT, chart::LABEL))
