@@ -299,4 +299,64 @@ mod tests {
         assert!(csv.contains("smappo targets+orca 25/40 mm (smappo_6.4_2.safetensors)"));
         std::fs::remove_dir_all(&dir).ok();
     }
+
+    /// An obstacle horizon other than a controller's default is part of its name
+    /// (docs/adr/0030), and one that is not a positive time, or is greedy-ORCA's without
+    /// greedy-ORCA, is refused by name.
+    #[test]
+    fn obstacle_horizons_are_named_in_results_and_checked() {
+        let dir = std::env::temp_dir().join(format!("tending-eval-obst-{}", std::process::id()));
+        let out = dir.to_str().unwrap();
+        let first_row = || {
+            let csv = std::fs::read_to_string(dir.join("results.csv")).unwrap();
+            csv.lines().nth(1).unwrap().to_string()
+        };
+        let script = ["--policy", "greedy-orca", "--out", out];
+        run(args(
+            &[&script[..], &["--script-obstacle-horizon", "0.15"]].concat(),
+        ))
+        .unwrap();
+        assert!(first_row().starts_with("greedy-orca obstacles 0.15 s,2.2_2,"));
+        let both = [
+            "--script-obstacle-horizon",
+            "0.15",
+            "--script-clearance",
+            "0.03",
+        ];
+        run(args(&[&script[..], &both[..]].concat())).unwrap();
+        assert!(first_row().starts_with("greedy-orca obstacles 0.15 s 30 mm,2.2_2,"));
+        let bundled = concat!(
+            env!("CARGO_MANIFEST_DIR"),
+            "/policy/pretrained/smappo_6.4_2.safetensors"
+        );
+        let ck = ["--checkpoint", bundled, "--out", out];
+        run(args(
+            &[&ck[..], &["--filter-obstacle-horizon", "0.3"]].concat(),
+        ))
+        .unwrap();
+        assert!(first_row().starts_with("smappo targets+orca obstacles 0.3 s (smappo_6.4_2"));
+        // the default horizon leaves the name as it was
+        run(args(&ck)).unwrap();
+        assert!(first_row().starts_with("smappo targets+orca (smappo_6.4_2"));
+        for bad in [
+            "--filter-obstacle-horizon=0",
+            "--filter-obstacle-horizon=NaN",
+            "--script-obstacle-horizon=-0.1",
+        ] {
+            let e = run(args(&["--checkpoint", bundled, bad])).unwrap_err();
+            let name = bad.split('=').next().unwrap();
+            assert!(e.to_string().contains(name), "{bad}: {e}");
+        }
+        let e = run(args(&[
+            "--checkpoint",
+            bundled,
+            "--script-obstacle-horizon",
+            "0.15",
+        ]));
+        assert!(e
+            .unwrap_err()
+            .to_string()
+            .contains("--script-obstacle-horizon"));
+        std::fs::remove_dir_all(&dir).ok();
+    }
 }
