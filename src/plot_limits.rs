@@ -5,7 +5,7 @@
 //! the target line means the target asks for nearly every part the layout allows.
 
 use crate::chart;
-use crate::records::{self, EvalResultRecord, PartsBoundRecord};
+use crate::records::{self, PartsBoundRecord};
 use anyhow::{bail, Result};
 use clap::Args;
 use plotters::prelude::*;
@@ -66,40 +66,9 @@ struct Column {
 /// Methods in first-read order, and the columns of every setup that has a bound and at
 /// least one script.
 fn columns(a: &LimitsArgs) -> Result<(Vec<String>, Vec<Column>)> {
-    let mut methods: Vec<String> = vec![];
-    let mut parts: BTreeMap<String, BTreeMap<String, Mean>> = BTreeMap::new();
-    for f in &a.files {
-        for records::Line { line, record: row } in records::read::<EvalResultRecord>(f)? {
-            let v = records::finite(f, line, "parts_delivered", row.parts_delivered)?;
-            if !methods.contains(&row.policy) {
-                methods.push(row.policy.clone());
-            }
-            parts
-                .entry(row.setup)
-                .or_default()
-                .entry(row.policy)
-                .or_default()
-                .add(v);
-        }
-    }
-    // Shown and matched against --scripts by the names `tending plot pareto` shows.
-    let labels = crate::plot_pareto::short_names(&methods);
-    let parts: BTreeMap<String, BTreeMap<String, Mean>> = parts
-        .into_iter()
-        .map(|(setup, by)| {
-            let by = by
-                .into_iter()
-                .map(|(m, v)| {
-                    (
-                        labels[methods.iter().position(|x| *x == m).unwrap_or(0)].clone(),
-                        v,
-                    )
-                })
-                .collect();
-            (setup, by)
-        })
-        .collect();
-    let methods = labels;
+    // Mean parts per setup and method, merged over files and named as `tending plot
+    // pareto` names them (so --scripts matches what its legend shows).
+    let (methods, points) = crate::plot_pareto::read(&a.files)?;
     let mut bound: BTreeMap<String, Mean> = BTreeMap::new();
     for f in &a.bound {
         for records::Line { line, record: r } in records::read::<PartsBoundRecord>(f)? {
@@ -115,11 +84,11 @@ fn columns(a: &LimitsArgs) -> Result<(Vec<String>, Vec<Column>)> {
         );
     }
     let mut cols = vec![];
-    for (setup, by) in &parts {
+    for (setup, by) in &points {
         let best = a
             .scripts
             .iter()
-            .filter_map(|s| by.get(s).map(|m| m.get()))
+            .filter_map(|s| by.get(s).map(|p| p.0))
             .fold(f64::NAN, f64::max);
         let Some(b) = bound.get(setup) else {
             bail!(
@@ -135,7 +104,7 @@ fn columns(a: &LimitsArgs) -> Result<(Vec<String>, Vec<Column>)> {
             best,
             ratios: methods
                 .iter()
-                .filter_map(|m| by.get(m).map(|v| (m.clone(), v.get() / best)))
+                .filter_map(|m| by.get(m).map(|p| (m.clone(), p.0 / best)))
                 .collect(),
             ceiling: b.get() / best,
         });
@@ -262,6 +231,7 @@ fn draw<DB: DrawingBackend>(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::records::EvalResultRecord;
 
     fn row(policy: &str, setup: &str, seed: u64, parts: f64) -> EvalResultRecord {
         EvalResultRecord {
@@ -269,6 +239,7 @@ mod tests {
             setup: setup.into(),
             seed,
             parts_delivered: parts,
+            contacts_per_robot_step: Some(0.0),
             ..Default::default()
         }
     }

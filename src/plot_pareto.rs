@@ -29,9 +29,12 @@ pub struct ParetoArgs {
 }
 
 /// setup -> method -> (mean parts, mean contacts per robot-step) over the method's rows.
-type Points = BTreeMap<String, BTreeMap<String, (f64, f64)>>;
+pub(crate) type Points = BTreeMap<String, BTreeMap<String, (f64, f64)>>;
 
-fn read(files: &[PathBuf]) -> Result<(Vec<String>, Points)> {
+/// Methods in first-read order (shown names, [`short_names`]) and every setup's points.
+/// A method's rows may be spread over several files; non-finite numbers are refused
+/// with the file, line and column.
+pub(crate) fn read(files: &[PathBuf]) -> Result<(Vec<String>, Points)> {
     let mut methods: Vec<String> = vec![];
     // (setup, method) -> sums of parts and contacts, and rows: a method's rows may be spread
     // over several files (one per group of setups, as in docs/safety).
@@ -45,12 +48,14 @@ fn read(files: &[PathBuf]) -> Result<(Vec<String>, Points)> {
                     f.display()
                 )
             })?;
+            let parts = records::finite(f, line, "parts_delivered", row.parts_delivered)?;
+            let contacts = records::finite(f, line, "contacts_per_robot_step", contacts)?;
             let m = row.policy;
             if !methods.contains(&m) {
                 methods.push(m.clone());
             }
             let e = sums.entry((row.setup, m)).or_default();
-            *e = (e.0 + row.parts_delivered, e.1 + contacts, e.2 + 1.0);
+            *e = (e.0 + parts, e.1 + contacts, e.2 + 1.0);
         }
     }
     let labels = short_names(&methods);
