@@ -7,7 +7,7 @@
 # episodes, 100 per curriculum step, 100 for 100.16_2), the same for SMAPPO and MAPPO so the
 # comparison stays fair; SEEDS (default "0 1 2") are training seeds; EVAL_EPISODES (default
 # 50) episodes per evaluation with eval seed 0. Each row of a table is mean (std) over the
-# training seeds. Runs land in runs/exp/<name>/, tables in docs/experiments/<name>.md.
+# training seeds. Runs land in $RUNS/<name>/, tables in docs/experiments/<name>.md.
 # A 2,000-episode 6.4_2 training takes ~20 min on the 2-core dev machine, so SCALE=1 with 3
 # seeds is hours per experiment; `tending train --resume` continues an interrupted run.
 #
@@ -22,7 +22,7 @@
 #      C's budget, evaluated zero-shot on C's setups
 #
 # Every experiment also evaluates the scripted greedy baseline on its setups (same episodes
-# and eval seed, runs/exp/<name>/greedy/eval, skipped when already there), puts the paper's
+# and eval seed, $RUNS/<name>/greedy/eval, skipped when already there), puts the paper's
 # MU next to ours (bench/experiments/paper_mu.csv: Tables I-IV) and draws
 # docs/experiments/<name>_{parts,collisions,mu,curves}.png with `tending plot`. The text
 # under the table's marker line in docs/experiments/<name>.md survives regeneration.
@@ -31,14 +31,22 @@ cd "$(dirname "$0")/../.."
 SCALE="${SCALE:-0.1}"
 SEEDS="${SEEDS:-0 1 2}"
 EVAL_EPISODES="${EVAL_EPISODES:-50}"
+# EVAL_SEEDS: evaluation seeds (comma-separated), each EVAL_EPISODES episodes.
+EVAL_SEEDS="${EVAL_SEEDS:-0}"
+# RUNS: where runs land. The paper-budget campaign (bench/experiments/campaign.sh) uses
+# results/paper, whose small files are committed so that it resumes on any machine.
+RUNS="${RUNS:-runs/exp}"
+# EXTRA: also evaluate greedy-ORCA, matching-ORCA and the shipped target-menu policy beside
+# greedy on every experiment's setups (1 = yes).
+EXTRA="${EXTRA:-0}"
 # TENDING: the binary to use (a copy keeps a long run safe from rebuilds of target/).
 T="${TENDING:-target/release/tending}"
 [ -x "$T" ] || cargo build --release --bin tending
 eps() { python3 -c "import math,sys; print(max(8, int(math.ceil($1 * $SCALE / 8.0)) * 8))"; }
-mkdir -p runs/exp docs/experiments
+mkdir -p "$RUNS" docs/experiments
 
 train_cfg() { # name max_robots max_machines max_storages -> path of a train TOML
-    local f="runs/exp/$1.train.toml"
+    local f="$RUNS/$1.train.toml"
     cat > "$f" <<TOML
 n_envs = 8
 ppo_epoch = 10
@@ -59,26 +67,48 @@ train() { # out model seed cfg args...
     echo "== train $model seed $seed -> $out ($*)"
     "$T" train --model "$model" --seed "$seed" --config "$cfg" --out "$out" --quiet "${resume[@]}" "$@"
     touch "$out/.done"
+    # a finished run needs only its policy, log and evaluation: the optimiser state (MBs)
+    # would only bloat the committed results
+    rm -f "$out/trainer_state.safetensors"
 }
 
-has_eval() { # results.csv setups: every setup evaluated with EVAL_EPISODES episodes?
-    [ -f "$1" ] && python3 - "$1" "$2" "$EVAL_EPISODES" <<'PY'
+has_eval() { # results.csv setups: every setup and eval seed with EVAL_EPISODES episodes?
+    [ -f "$1" ] && python3 - "$1" "$2" "$EVAL_EPISODES" "$EVAL_SEEDS" <<'PY'
 import csv, sys
-got = {r["setup"] for r in csv.DictReader(open(sys.argv[1])) if r["episodes"] == sys.argv[3]}
-sys.exit(0 if set(sys.argv[2].split(",")) <= got else 1)
+rows = list(csv.DictReader(open(sys.argv[1])))
+got = {(r["setup"], r.get("seed", "0")) for r in rows if r["episodes"] == sys.argv[3]}
+want = {(s, e) for s in sys.argv[2].split(",") for e in sys.argv[4].split(",")}
+sys.exit(0 if want <= got else 1)
 PY
 }
 
 evaluate() { # checkpoint setups out (skipped when out has them all, newer than checkpoint)
     [ "$3/results.csv" -nt "$1" ] && has_eval "$3/results.csv" "$2" && return
-    "$T" eval --checkpoint "$1" --setups "$2" --episodes "$EVAL_EPISODES" --seeds 0 --out "$3" >/dev/null
+    echo "== eval $1 -> $3 ($2)"
+    "$T" eval --checkpoint "$1" --setups "$2" --episodes "$EVAL_EPISODES" --seeds "$EVAL_SEEDS" --out "$3" >/dev/null
 }
 
-greedy() { # name setups: the scripted baseline on the experiment's setups
-    local out="runs/exp/$1/greedy/eval"
-    has_eval "$out/results.csv" "$2" && return
-    echo "== eval greedy -> $out ($2)"
-    "$T" eval --policy greedy --setups "$2" --episodes "$EVAL_EPISODES" --seeds 0 --out "$out" >/dev/null
+greedy() { # name setups: the scripted baselines on the experiment's setups (not trained)
+    local out="$RUNS/$1/greedy/eval"
+    if ! has_eval "$out/results.csv" "$2"; then
+        echo "== eval greedy -> $out ($2)"
+        "$T" eval --policy greedy --setups "$2" --episodes "$EVAL_EPISODES" --seeds "$EVAL_SEEDS" --out "$out" >/dev/null
+    fi
+    [ "$EXTRA" = 1 ] || return 0
+    out="$RUNS/$1/greedy-orca/eval"
+    if ! has_eval "$out/results.csv" "$2"; then
+        echo "== eval greedy-orca -> $out ($2)"
+        "$T" eval --policy greedy-orca --setups "$2" --episodes "$EVAL_EPISODES" --seeds "$EVAL_SEEDS" --out "$out" >/dev/null
+    fi
+    # matching-ORCA and the shipped target-menu policy (trained on 6.4_2 behind the ORCA
+    # filter, evaluated as robot_node runs it): evaluation only, never trained here
+    local name ckpt
+    for name in matching-orca shipped; do
+        ckpt=policy/pretrained/smappo_6.4_2.safetensors
+        [ "$name" = matching-orca ] && ckpt=policy/pretrained/matching_orca.safetensors
+        out="$RUNS/$1/$name/eval"
+        evaluate "$ckpt" "$2" "$out"
+    done
 }
 
 plot_bin() { # a tending that has `plot` (TENDING may be an older copy)
@@ -113,34 +143,51 @@ exp_a() {
         local cfg; cfg=$(train_cfg "A_$s" "$nr" "$nm" "$ns")
         for seed in $SEEDS; do
             for m in smappo mappo; do
-                local out="runs/exp/A/$s/$m/seed$seed"
+                local out="$RUNS/A/$s/$m/seed$seed"
                 train "$out" "$m" "$seed" "$cfg" --setup "$s" --episodes "$e"
                 evaluate "$out/policy.safetensors" "$s" "$out/eval"
             done
         done
     done
     greedy A "${setups// /,}"
-    table A "A: full retraining" runs/exp/A/*/*/seed*/eval/results.csv runs/exp/A/greedy/eval/results.csv
-    curves A "A: full retraining, training per setup" --metrics reward,mu runs/exp/A/*/*/seed*/log.csv
+    table A "A: full retraining" $RUNS/A/*/*/seed*/eval/results.csv $RUNS/A/greedy/eval/results.csv
+    curves A "A: full retraining, training per setup" --metrics reward,mu $RUNS/A/*/*/seed*/log.csv
 }
 
 # Zero-shot experiments (C, R): train on 6.4_2-sized data (MAPPO padded to 42.28_14), then
 # evaluate every model on the nine zero-shot setups.
 ZERO_SHOT_SETUPS=6.4_2,2.2_2,4.2_2,12.8_4,18.12_6,24.16_8,30.20_10,36.24_12,42.28_14
+# BEYOND: setups past the paper's largest (same 3:2:1 ratio up to 100 robots), where
+# zero-shot is expected to break; empty to skip
+BEYOND="${BEYOND-60.40_20,80.52_26,100.66_33}"
 zero_shot() { # name table-title curves-title train-args...
     local name="$1" title="$2" ctitle="$3"; shift 3
     local cfg; cfg=$(train_cfg "$name" 42 28 14)
     local e; e=$(eps 2000)
     for seed in $SEEDS; do
         for m in smappo mappo; do
-            local out="runs/exp/$name/$m/seed$seed"
-            train "$out" "$m" "$seed" "$cfg" "$@" --episodes "$e"
-            evaluate "$out/policy.safetensors" "$ZERO_SHOT_SETUPS" "$out/eval"
+            local out="$RUNS/$name/$m/seed$seed"
+            if [ "$name" = C ] && [ "$m" = smappo ]; then
+                # the paper's C evaluates A's 6.4_2 model: SMAPPO is input-size invariant,
+                # so that run is the zero-shot model; linked, not trained twice
+                local a="$RUNS/A/6.4_2/smappo/seed$seed"
+                train "$a" smappo "$seed" "$(train_cfg A_6.4_2 6 4 2)" --setup 6.4_2 --episodes "$e"
+                mkdir -p "$out"
+                ln -sfn "../../../A/6.4_2/smappo/seed$seed/policy.safetensors" "$out/policy.safetensors"
+                ln -sfn "../../../A/6.4_2/smappo/seed$seed/log.csv" "$out/log.csv"
+            else
+                train "$out" "$m" "$seed" "$cfg" "$@" --episodes "$e"
+            fi
+            local setups="$ZERO_SHOT_SETUPS"
+            # beyond the paper's largest setup only SMAPPO runs: MAPPO's input is padded to
+            # 42.28_14 and cannot take more
+            [ "$m" = smappo ] && [ -n "$BEYOND" ] && setups="$setups,$BEYOND"
+            evaluate "$out/policy.safetensors" "$setups" "$out/eval"
         done
     done
-    greedy "$name" "$ZERO_SHOT_SETUPS"
-    table "$name" "$title" runs/exp/"$name"/*/seed*/eval/results.csv runs/exp/"$name"/greedy/eval/results.csv
-    curves "$name" "$ctitle" runs/exp/"$name"/*/seed*/log.csv
+    greedy "$name" "$ZERO_SHOT_SETUPS${BEYOND:+,$BEYOND}"
+    table "$name" "$title" $RUNS/"$name"/*/seed*/eval/results.csv $RUNS/"$name"/greedy/eval/results.csv
+    curves "$name" "$ctitle" $RUNS/"$name"/*/seed*/log.csv
 }
 exp_c() { zero_shot C "C: zero-shot from 6.4_2" "C: training on 6.4_2" --setup 6.4_2; }
 
@@ -151,7 +198,7 @@ curriculum() { # name initial-episodes
     local cfg; cfg=$(train_cfg "$name" 24 16 8)
     for seed in $SEEDS; do
         for m in smappo mappo; do
-            local out="runs/exp/$name/$m/seed$seed"
+            local out="$RUNS/$name/$m/seed$seed"
             train "$out" "$m" "$seed" "$cfg" --curriculum "$sched"
             evaluate "$out/policy.safetensors" 6.4_2,12.8_4,18.12_6,24.16_8 "$out/eval"
         done
@@ -161,13 +208,13 @@ curriculum() { # name initial-episodes
 
 exp_b() {
     curriculum B 2000
-    table B "B: curriculum" runs/exp/B/*/seed*/eval/results.csv runs/exp/B/greedy/eval/results.csv
-    curves B "B: curriculum" runs/exp/B/*/seed*/log.csv
+    table B "B: curriculum" $RUNS/B/*/seed*/eval/results.csv $RUNS/B/greedy/eval/results.csv
+    curves B "B: curriculum" $RUNS/B/*/seed*/log.csv
 }
 exp_d() {
     curriculum D 200
-    table D "D: curriculum, short initial training" runs/exp/D/*/seed*/eval/results.csv runs/exp/D/greedy/eval/results.csv
-    curves D "D: curriculum, short initial training" runs/exp/D/*/seed*/log.csv
+    table D "D: curriculum, short initial training" $RUNS/D/*/seed*/eval/results.csv $RUNS/D/greedy/eval/results.csv
+    curves D "D: curriculum, short initial training" $RUNS/D/*/seed*/log.csv
 }
 
 # Beyond the paper: one policy trained on randomized counts (drawn per update from RANGE,
