@@ -117,14 +117,24 @@ plot_bin() { # a tending that has `plot` (TENDING may be an older copy)
     echo target/release/tending
 }
 
-table() { # name title csv-glob...
+table() { # name title csv-glob... [-- training log.csv... for the paper's last-100 protocol]
     local name="$1" title="$2"; shift 2
+    local files=() logs=() extra=() f
+    while [ $# -gt 0 ] && [ "$1" != -- ]; do files+=("$1"); shift; done
+    [ $# -gt 0 ] && shift && logs=("$@")
+    for f in greedy-orca matching-orca shipped; do
+        [ -f "$RUNS/$name/$f/eval/results.csv" ] && extra+=("$RUNS/$name/$f/eval/results.csv")
+    done
     python3 bench/experiments/table.py --exp "$name" --paper bench/experiments/paper_mu.csv \
-        --eval-episodes "$EVAL_EPISODES" --out "docs/experiments/$name.md" \
-        "$title" "$SCALE" "$SEEDS" "$@"
+        --eval-episodes "$EVAL_EPISODES" --eval-seeds "$EVAL_SEEDS" --out "docs/experiments/$name.md" \
+        ${logs[@]:+--logs "${logs[@]}"} "$title" "$SCALE" "$SEEDS" "${files[@]}" ${extra[@]:+"${extra[@]}"}
     echo "wrote docs/experiments/$name.md"
+    # the bars draw the trained models beside greedy and greedy-ORCA (the policy column
+    # names those two; matching-ORCA and the shipped policy are in the table)
+    local bars=("${files[@]}")
+    [ -f "$RUNS/$name/greedy-orca/eval/results.csv" ] && bars+=("$RUNS/$name/greedy-orca/eval/results.csv")
     "$(plot_bin)" plot bars --out "docs/experiments/$name" --title "$title" \
-        --paper bench/experiments/paper_mu.csv --experiment "$name" "$@" \
+        --paper bench/experiments/paper_mu.csv --experiment "$name" "${bars[@]}" \
         || echo "!! plot bars for $name failed" >&2
 }
 
@@ -150,7 +160,8 @@ exp_a() {
         done
     done
     greedy A "${setups// /,}"
-    table A "A: full retraining" $RUNS/A/*/*/seed*/eval/results.csv $RUNS/A/greedy/eval/results.csv
+    table A "A: full retraining" $RUNS/A/*/*/seed*/eval/results.csv $RUNS/A/greedy/eval/results.csv \
+        -- $RUNS/A/*/*/seed*/log.csv
     curves A "A: full retraining, training per setup" --metrics reward,mu $RUNS/A/*/*/seed*/log.csv
 }
 

@@ -14,8 +14,16 @@ import argparse, csv, os, statistics, sys
 from collections import defaultdict
 
 KEEP = "<!-- Generated above by bench/experiments/table.py; text below this line is kept on regeneration. -->"
-ORDER = ["smappo", "mappo", "greedy", "random"]
-SCRIPTED = {"greedy", "random"}
+ORDER = ["smappo", "mappo", "greedy", "greedy-orca", "matching-orca", "shipped", "random"]
+# evaluated, never trained here: one evaluation, std over eval seeds
+SCRIPTED = {"greedy", "greedy-orca", "matching-orca", "shipped", "random"}
+# methods whose results.csv `policy` column does not name them (matching-ORCA is a
+# checkpoint, the shipped policy an SMAPPO): named by their directory (run.sh EXTRA=1)
+BY_DIR = {"greedy-orca", "matching-orca", "shipped"}
+# contact steps by kind (results.csv columns), after parts, collisions and MU
+KINDS = ["collisions_robot_robot", "collisions_robot_machine", "collisions_robot_storage",
+         "collisions_robot_wall"]
+METRICS = ["parts_delivered", "collisions", "mu"] + KINDS
 
 
 def setup_key(s):
@@ -31,6 +39,9 @@ def norm_setup(s):
 
 
 def model_of(policy, path):
+    for part in path.split(os.sep):
+        if part in BY_DIR:
+            return part
     word = (policy.split() or [""])[0].lower()
     if word:
         return word
@@ -40,15 +51,16 @@ def model_of(policy, path):
     sys.exit(f"{path}: empty policy column and no model in the path")
 
 
-def read_eval(path):
-    """-> model, {setup: [(parts, collisions, mu) per eval row]}"""
+def read_eval(path, eval_seed=None):
+    """-> model, {setup: [(parts, collisions, mu, contacts by kind...) per eval row]}
+    (only the rows of `eval_seed` when given)"""
     try:
         rows = list(csv.DictReader(open(path)))
     except OSError as e:
         sys.exit(f"{path}: {e}")
     if not rows:
         sys.exit(f"{path}: no data rows")
-    need = {"policy", "setup", "parts_delivered", "collisions", "mu"}
+    need = {"policy", "setup"} | set(METRICS)
     missing = need - set(rows[0].keys())
     if missing:
         sys.exit(f"{path}: missing column(s) {', '.join(sorted(missing))}")
@@ -57,9 +69,10 @@ def read_eval(path):
         sys.exit(f"{path}: several policies {sorted(models)}; one model per file expected")
     per = defaultdict(list)
     for i, r in enumerate(rows, start=2):
+        if eval_seed is not None and r.get("seed", "0") != str(eval_seed):
+            continue
         try:
-            per[r["setup"]].append(
-                (float(r["parts_delivered"]), float(r["collisions"]), float(r["mu"])))
+            per[r["setup"]].append(tuple(float(r[k]) for k in METRICS))
         except ValueError as e:
             sys.exit(f"{path}:{i}: {e}")
     return models.pop(), per
@@ -97,60 +110,108 @@ def kept_text(path):
     return "\n".join(lines[i:]).strip("\n")
 
 
+def last100(path):
+    """A training log.csv -> (setup, model, (parts, collisions, mu)) averaged over the
+    updates that cover its last 100 episodes (the paper's Table I protocol)."""
+    rows = list(csv.DictReader(open(path)))
+    if not rows:
+        sys.exit(f"{path}: no data rows")
+    end = int(rows[-1]["episodes"])
+    last = [r for r in rows if int(r["episodes"]) > end - 100]
+    model = next((p for p in reversed(path.split(os.sep)) if p in ORDER), None)
+    if model is None:
+        sys.exit(f"{path}: no model in the path")
+    return rows[-1]["setup"], model, tuple(
+        statistics.fmean(float(r[k]) for r in last) for k in ("parts_delivered", "collisions", "mu"))
+
+
+def aggregate(files, eval_seed=None):
+    """(setup, method) -> list of per-run metric tuples (training seeds), and for scripted
+    methods the per-eval-row tuples (std over eval seeds)."""
+    runs, scripted_rows = defaultdict(list), defaultdict(list)
+    for f in files:
+        model, per = read_eval(f, eval_seed)
+        for setup, vals in per.items():
+            if not vals:
+                continue
+            runs[(setup, model)].append(
+                tuple(statistics.fmean(v[k] for v in vals) for k in range(len(METRICS))))
+            if model in SCRIPTED:
+                scripted_rows[(setup, model)].extend(vals)
+    return runs, scripted_rows
+
+
+def cells_of(runs, scripted_rows, s, m, precision):
+    """Formatted mean (std) cells of every metric, and the training-seed count."""
+    v = runs[(s, m)]
+    if m in SCRIPTED and len(v) == 1:
+        rows = scripted_rows[(s, m)]
+        return [ms([r[k] for r in rows], p, len(rows) > 1) for k, p in precision], "none (scripted)"
+    return [ms([x[k] for x in v], p) for k, p in precision], str(len(v))
+
+
 def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--exp", help="experiment name (A..D): paper rows and plot names")
     ap.add_argument("--paper", help="CSV experiment,setup,model,mu,std of the paper's MU")
     ap.add_argument("--out", help="write here, keeping the hand-written text below the marker")
     ap.add_argument("--eval-episodes", help="episodes per evaluation (for the note)")
+    ap.add_argument("--eval-seeds", default="0", help="evaluation seeds (for the note)")
+    ap.add_argument("--logs", nargs="*", default=[],
+                    help="training log.csv files: the paper's protocol is their last 100 "
+                         "episodes (Table I); without, it is evaluation seed 0 alone")
     ap.add_argument("title")
     ap.add_argument("scale")
     ap.add_argument("seeds")
     ap.add_argument("files", nargs="+")
     a = ap.parse_args()
 
-    # (setup, model) -> per training run: per-run mean over its evaluation rows
-    runs = defaultdict(list)
-    # (setup, model) -> evaluation rows of a scripted baseline (std over eval seeds)
-    scripted_rows = defaultdict(list)
-    for f in a.files:
-        model, per = read_eval(f)
-        for setup, vals in per.items():
-            runs[(setup, model)].append(tuple(statistics.fmean(v[k] for v in vals) for k in range(3)))
-            if model in SCRIPTED:
-                scripted_rows[(setup, model)].extend(vals)
+    runs, scripted_rows = aggregate(a.files)
+    # the paper's protocol: last 100 training episodes (A) or 50 episodes of eval seed 0
+    if a.logs:
+        paper_runs = defaultdict(list)
+        for f in a.logs:
+            setup, model, v = last100(f)
+            paper_runs[(setup, model)].append((v[2],))
+        proto = "mean over its last 100 training episodes"
+    else:
+        paper_runs, _ = aggregate(a.files, eval_seed=0)
+        paper_runs = {k: [(x[2],) for x in v] for k, v in paper_runs.items()}
+        proto = "evaluation seed 0 alone"
     paper = read_paper(a.paper, a.exp)
 
+    n_seeds = len(a.eval_seeds.split(","))
     out = [f"# {a.title}\n"]
     out.append(
         f"Budget: {a.scale} x the paper's episodes; training seeds {a.seeds}; each cell is mean (std) "
         "over training seeds of the mean over evaluation episodes"
-        + (f" ({a.eval_episodes} per setup, eval seed 0)" if a.eval_episodes else "")
-        + ". Scripted baselines are not trained: one evaluation on the same setups, episodes "
-        "and eval seeds, so their std is '-' (or over eval seeds when there are several). "
-        "paper MU: the paper's value for that model at its full budget"
+        + (f" ({a.eval_episodes} per setup and eval seed, eval seeds {a.eval_seeds}, argmax actions)"
+           if a.eval_episodes else "")
+        + ". Scripted baselines and the shipped policy are not trained here: one evaluation on "
+        "the same setups, episodes and eval seeds, std over eval seeds"
+        + (f" ({n_seeds})" if n_seeds > 1 else " ('-' with one)")
+        + ". Collisions are contact steps per episode (robot-steps in contact), split by kind: "
+        "robot-robot (r-r), robot-machine (r-m), robot-storage (r-s), robot-wall (r-w). "
+        f"MU (paper's protocol): trained models only, {proto}. "
+        "paper MU: the paper's value at its full budget"
         + (f" ({tables(a.exp)})" if a.exp and tables(a.exp) else "")
         + ", '-' where it reports none.\n")
-    out.append("| setup | model | training seeds | parts delivered | collisions | MU | paper MU |")
-    out.append("|---|---|---|---|---|---|---|")
+    out.append("| setup | method | training seeds | parts delivered | collisions | r-r | r-m | r-s "
+               "| r-w | MU | MU (paper's protocol) | paper MU |")
+    out.append("|---|---|---|---|---|---|---|---|---|---|---|---|")
+    precision = [(0, 1), (1, 1), (3, 1), (4, 1), (5, 1), (6, 1), (2, 2)]
     setups = sorted({s for s, _ in runs}, key=setup_key)
     models = sorted({m for _, m in runs}, key=lambda m: (ORDER.index(m) if m in ORDER else len(ORDER), m))
     for s in setups:
         for m in models:
-            v = runs.get((s, m))
-            if not v:
+            if not runs.get((s, m)):
                 continue
-            if m in SCRIPTED and len(v) == 1:
-                rows = scripted_rows[(s, m)]
-                several = len(rows) > 1
-                cells = [ms([r[k] for r in rows], p, several) for k, p in ((0, 1), (1, 1), (2, 2))]
-                seeds = "none (scripted)"
-            else:
-                cells = [ms([x[k] for x in v], p) for k, p in ((0, 1), (1, 1), (2, 2))]
-                seeds = str(len(v))
+            cells, seeds = cells_of(runs, scripted_rows, s, m, precision)
+            pp = paper_runs.get((s, m)) if m not in SCRIPTED else None
+            pcell_ours = ms([x[0] for x in pp], 2) if pp else "-"
             pm = paper.get((norm_setup(s), m))
             pcell = "-" if pm is None else (f"{pm[0]:.2f} ({float(pm[1]):.2f})" if pm[1] else f"{pm[0]:.2f}")
-            out.append(f"| {s} | {m} | {seeds} | {' | '.join(cells)} | {pcell} |")
+            out.append(f"| {s} | {m} | {seeds} | {' | '.join(cells)} | {pcell_ours} | {pcell} |")
     if a.exp:
         e = a.exp
         out.append("")
