@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # The paper's four experiments (section V) with `tending train` / `tending eval`.
 #
-#   bench/experiments/run.sh A|B|C|D|R|all
+#   bench/experiments/run.sh A|B|C|D|R|all|report   (report: tables and verdicts only)
 #
 # Budget: SCALE (default 0.1) multiplies every episode count of the paper (2,000 initial
 # episodes, 100 per curriculum step, 100 for 100.16_2), the same for SMAPPO and MAPPO so the
@@ -160,6 +160,9 @@ exp_a() {
         done
     done
     greedy A "${setups// /,}"
+    report_a
+}
+report_a() {
     table A "A: full retraining" $RUNS/A/*/*/seed*/eval/results.csv $RUNS/A/greedy/eval/results.csv \
         -- $RUNS/A/*/*/seed*/log.csv
     curves A "A: full retraining, training per setup" --metrics reward,mu $RUNS/A/*/*/seed*/log.csv
@@ -197,10 +200,14 @@ zero_shot() { # name table-title curves-title train-args...
         done
     done
     greedy "$name" "$ZERO_SHOT_SETUPS${BEYOND:+,$BEYOND}"
-    table "$name" "$title" $RUNS/"$name"/*/seed*/eval/results.csv $RUNS/"$name"/greedy/eval/results.csv
-    curves "$name" "$ctitle" $RUNS/"$name"/*/seed*/log.csv
+    report_zero_shot "$name" "$title" "$ctitle"
 }
-exp_c() { zero_shot C "C: zero-shot from 6.4_2" "C: training on 6.4_2" --setup 6.4_2; }
+report_zero_shot() { # name table-title curves-title
+    table "$1" "$2" $RUNS/"$1"/*/seed*/eval/results.csv $RUNS/"$1"/greedy/eval/results.csv
+    curves "$1" "$3" $RUNS/"$1"/*/seed*/log.csv
+}
+C_TITLES=("C: zero-shot from 6.4_2" "C: training on 6.4_2")
+exp_c() { zero_shot C "${C_TITLES[@]}" --setup 6.4_2; }
 
 curriculum() { # name initial-episodes
     local name="$1" e0; e0=$(eps "$2")
@@ -217,15 +224,27 @@ curriculum() { # name initial-episodes
     greedy "$name" 6.4_2,12.8_4,18.12_6,24.16_8
 }
 
-exp_b() {
-    curriculum B 2000
-    table B "B: curriculum" $RUNS/B/*/seed*/eval/results.csv $RUNS/B/greedy/eval/results.csv
-    curves B "B: curriculum" $RUNS/B/*/seed*/log.csv
+exp_b() { curriculum B 2000; report_curriculum B "B: curriculum"; }
+exp_d() { curriculum D 200; report_curriculum D "D: curriculum, short initial training"; }
+report_curriculum() { # name title
+    table "$1" "$2" $RUNS/"$1"/*/seed*/eval/results.csv $RUNS/"$1"/greedy/eval/results.csv
+    curves "$1" "$2" $RUNS/"$1"/*/seed*/log.csv
 }
-exp_d() {
-    curriculum D 200
-    table D "D: curriculum, short initial training" $RUNS/D/*/seed*/eval/results.csv $RUNS/D/greedy/eval/results.csv
-    curves D "D: curriculum, short initial training" $RUNS/D/*/seed*/log.csv
+
+# Tables, plots and the verdicts from whatever has finished (a campaign in flight included).
+report_all() {
+    shopt -s nullglob
+    local e
+    for e in A B C D; do
+        [ -n "$(echo $RUNS/$e/*/seed*/eval/results.csv $RUNS/$e/*/*/seed*/eval/results.csv)" ] || continue
+        case "$e" in
+            A) report_a ;; C) report_zero_shot C "${C_TITLES[@]}" ;;
+            B) report_curriculum B "B: curriculum" ;;
+            D) report_curriculum D "D: curriculum, short initial training" ;;
+        esac
+    done
+    python3 bench/experiments/verdict.py --runs "$RUNS" --out docs/experiments/verdict.md
+    echo "wrote docs/experiments/verdict.md"
 }
 
 # Beyond the paper: one policy trained on randomized counts (drawn per update from RANGE,
@@ -240,5 +259,6 @@ exp_r() {
 case "${1:-}" in
     A) exp_a ;; B) exp_b ;; R) exp_r ;; C) exp_c ;; D) exp_d ;;
     all) exp_a; exp_b; exp_c; exp_d; exp_r ;;
+    report) report_all ;;
     *) sed -n '2,26p' "$0"; exit 2 ;;
 esac
