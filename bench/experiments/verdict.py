@@ -56,14 +56,20 @@ class Exp:
                 self.curves.setdefault((setup, model), []).append(list(csv.DictReader(open(f))))
 
     def values(self, setup, model, k):
-        """Per-seed values of metric k (0 parts, 1 collisions, 2 MU), or None if not all
-        seeds are there. Table I (A) uses the last 100 training episodes."""
+        """Per-seed values of metric k (0 parts, 1 collisions, 2 MU) of the seeds finished
+        so far (None if none). Table I (A) uses the last 100 training episodes."""
         src = self.logs if self.name == "A" else self.eval
         v = src.get((setup, model), [])
-        return [x[k] for x in v] if len(v) >= SEEDS else None
+        return [x[k] for x in v] if v else None
 
     def missing(self, setups, models=("smappo", "mappo")):
-        return [f"{s} {m}" for s in setups for m in models if self.values(s, m, 2) is None]
+        """(setup model) pairs with fewer than SEEDS finished seeds."""
+        return [f"{s} {m}" for s in setups for m in models
+                if len(self.values(s, m, 2) or []) < SEEDS]
+
+    def seeds_note(self, setups):
+        n = {len(self.values(s, m, 2) or []) for s in setups for m in ("smappo", "mappo")}
+        return "" if n == {SEEDS} else f" [interim: {min(n)}-{max(n)} of {SEEDS} seeds]"
 
 
 def mean(xs):
@@ -77,7 +83,7 @@ def pct(a, b):
 def table_verdict(e, paper, setups):
     """Tables I-IV: SMAPPO vs the paper and vs MAPPO, per setup."""
     miss = e.missing(setups)
-    done = [s for s in setups if f"{s} smappo" not in miss and f"{s} mappo" not in miss]
+    done = [s for s in setups if e.values(s, "smappo", 2) and e.values(s, "mappo", 2)]
     if not done:
         return "pending", "-", f"no setup finished ({len(miss)} runs missing)"
     meets = [s for s in done if mean(e.values(s, "smappo", 2)) >= paper[(s, "smappo")][0] - 1e-9]
@@ -87,8 +93,9 @@ def table_verdict(e, paper, setups):
         for s in done)
     note = (f"SMAPPO at or above the paper's MU on {len(meets)}/{len(done)}, above MAPPO on "
             f"{len(beats)}/{len(done)}")
+    ours += e.seeds_note(done)
     if miss:
-        return "pending", ours, note + f"; missing: {', '.join(miss)}"
+        return "pending", ours, note + f"; not all {SEEDS} seeds: {', '.join(miss)}"
     if len(meets) == len(done) and len(beats) == len(done):
         v = "reproduced"
     elif len(beats) > len(done) / 2 or meets:
@@ -101,7 +108,7 @@ def table_verdict(e, paper, setups):
 def gain_verdict(e, setups, paper_pct, k=0, fewer=False):
     """'up to X %': the largest SMAPPO-over-MAPPO gain of metric k (fewer: reduction)."""
     miss = e.missing(setups)
-    done = [s for s in setups if f"{s} smappo" not in miss and f"{s} mappo" not in miss]
+    done = [s for s in setups if e.values(s, "smappo", 2) and e.values(s, "mappo", 2)]
     if not done:
         return "pending", "-", f"{len(miss)} runs missing"
     gains = {}
@@ -111,8 +118,9 @@ def gain_verdict(e, setups, paper_pct, k=0, fewer=False):
     best = max(gains, key=gains.get)
     ours = f"{gains[best]:+.0f} % ({best})"
     note = "per setup: " + ", ".join(f"{s} {g:+.0f} %" for s, g in gains.items())
+    ours += e.seeds_note(done)
     if miss:
-        return "pending", ours, note + f"; missing: {', '.join(miss)}"
+        return "pending", ours, note + f"; not all {SEEDS} seeds: {', '.join(miss)}"
     if gains[best] >= paper_pct:
         return "reproduced", ours, note
     return ("partly" if gains[best] > 0 else "not"), ours, note
@@ -120,15 +128,16 @@ def gain_verdict(e, setups, paper_pct, k=0, fewer=False):
 
 def safer_verdict(e, setups, paper_rule):
     miss = e.missing(setups)
-    done = [s for s in setups if f"{s} smappo" not in miss and f"{s} mappo" not in miss]
+    done = [s for s in setups if e.values(s, "smappo", 2) and e.values(s, "mappo", 2)]
     if not done:
         return "pending", "-", f"{len(miss)} runs missing"
     fewer = [s for s in done if mean(e.values(s, "smappo", 1)) < mean(e.values(s, "mappo", 1))]
     ours = f"fewer collisions on {len(fewer)}/{len(done)}"
     note = ", ".join(f"{s} {mean(e.values(s, 'smappo', 1)):.0f} vs {mean(e.values(s, 'mappo', 1)):.0f}"
                      for s in done)
+    ours += e.seeds_note(done)
     if miss:
-        return "pending", ours, note + f"; missing: {', '.join(miss)}"
+        return "pending", ours, note + f"; not all {SEEDS} seeds: {', '.join(miss)}"
     need = len(done) - paper_rule
     v = "reproduced" if len(fewer) >= need else ("partly" if fewer else "not")
     return v, ours, note
@@ -185,6 +194,38 @@ def stage_drops(e):
     return v, ours, f"reward drops at a stage change: SMAPPO {drops['smappo']}, MAPPO {drops['mappo']}"
 
 
+# The paper's 100.16_2 training: 3.54 days per seed on an AMD EPYC 9654 (96 cores), the
+# core-hours if every core was busy (the paper does not say how many it used).
+PAPER_DAYS_100, PAPER_CORES = 3.54, 96
+
+
+def compute_table(runs_dir, cores=2):
+    """Training wall time per finished run (log.csv's wall_secs: the trainer's own time in
+    updates, saving excluded), mean over seeds, and core-hours as wall x this machine's
+    cores (an upper bound: the trainer uses both, shared with other work)."""
+    by = {}
+    for f in sorted(glob.glob(f"{runs_dir}/*/*/seed*/log.csv") + glob.glob(f"{runs_dir}/*/*/*/seed*/log.csv")):
+        if os.path.islink(f) or not os.path.exists(os.path.join(os.path.dirname(f), ".done")):
+            continue
+        rows = list(csv.DictReader(open(f)))
+        parts = os.path.relpath(f, runs_dir).split(os.sep)
+        exp, model = parts[0], parts[-3]
+        what = rows[0]["setup"] if exp == "A" else "->".join(dict.fromkeys(r["setup"] for r in rows))
+        key = (exp, what, model, rows[-1]["episodes"])
+        by.setdefault(key, []).append(float(rows[-1]["wall_secs"]))
+    out = ["| experiment | setup(s) | model | episodes | finished seeds | wall time per run | core-hours per run |",
+           "|---|---|---|---|---|---|---|"]
+    for (exp, what, model, eps), w in sorted(by.items()):
+        m = statistics.fmean(w)
+        out.append(f"| {exp} | {what} | {model} | {eps} | {len(w)} | {m / 60:.1f} min | {m * cores / 3600:.2f} |")
+    paper_ch = PAPER_DAYS_100 * 24 * PAPER_CORES
+    out.append("")
+    out.append(f"The paper: {PAPER_DAYS_100} days per seed for 100.16_2 (100 episodes) on a "
+               f"{PAPER_CORES}-core AMD EPYC 9654, {PAPER_DAYS_100 * 24:.0f} h wall and at most "
+               f"{paper_ch:.0f} core-hours. Ours on this 2-core machine: the rows above.")
+    return out
+
+
 def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--runs", default="results/paper")
@@ -229,6 +270,7 @@ def main():
     out = ["| claim of the paper | paper | ours | verdict | detail |", "|---|---|---|---|---|"]
     for claim, theirs, (v, ours, note) in rows:
         out.append(f"| {claim} | {theirs} | {ours} | **{v}** | {note} |")
+    out += ["", "## Compute", ""] + compute_table(a.runs)
     text = "\n".join(out) + "\n"
     if a.out:
         open(a.out, "w").write(text)
