@@ -5,6 +5,7 @@
 #
 #   bench/experiments/campaign.sh            # run (or resume) everything, in the background:
 #   nohup nice -n 10 bench/experiments/campaign.sh > results/paper/campaign.log 2>&1 &
+#   bench/experiments/campaign.sh report     # tables, plots, verdicts of what has finished
 #
 # Order: cheapest verdicts first (C and D train at 6.4_2; B adds three 100-episode stages;
 # A's large setups and 100.16_2 last). Runs land in results/paper/<experiment>/...; their
@@ -17,11 +18,15 @@
 # campaign runs does not swap it mid-way (same source: the copy is refreshed on each start).
 set -euo pipefail
 cd "$(dirname "$0")/../.."
+export SCALE=1 SEEDS="${SEEDS:-0 1 2}" EVAL_EPISODES=50 EVAL_SEEDS=0,1,2 RUNS=results/paper \
+    EXTRA=1 FULL_100=1
+if [ "${1:-}" = report ]; then
+    exec bench/experiments/run.sh report
+fi
 cargo build --release --bin tending
 mkdir -p runs/campaign-bin results/paper
 cp target/release/tending runs/campaign-bin/tending
-export TENDING=runs/campaign-bin/tending SCALE=1 SEEDS="${SEEDS:-0 1 2}" EVAL_EPISODES=50 \
-    EVAL_SEEDS=0,1,2 RUNS=results/paper EXTRA=1 FULL_100=1
+export TENDING=runs/campaign-bin/tending
 for e in ${EXPERIMENTS:-C D B A}; do
     echo "=== experiment $e at $(date -u +%FT%TZ)"
     bench/experiments/run.sh "$e"
