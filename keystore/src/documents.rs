@@ -5,20 +5,29 @@ use time::OffsetDateTime;
 
 use crate::policy::Grant;
 
-/// ROS domain ids (`ROS_DOMAIN_ID` 0..=232): one keystore serves any of them.
-const DOMAINS: &str = "<id_range><min>0</min><max>232</max></id_range>";
+/// The domains a keystore serves: every ROS domain id up to
+/// [`msgs::enclave::MAX_SECURE_DOMAIN`] (230, not ROS's 232: Cyclone DDS's parser refuses
+/// a governance or permissions document naming a domain above 230, so a keystore that
+/// says 232 cannot be used by a Cyclone DDS node at all).
+fn domains() -> String {
+    format!(
+        "<id_range><min>0</min><max>{}</max></id_range>",
+        msgs::enclave::MAX_SECURE_DOMAIN
+    )
+}
 
 /// The domain governance: SROS2's default. Unauthenticated participants are refused,
 /// joining needs valid permissions, discovery and liveliness are encrypted, every RTPS
 /// message is signed, and every topic has read and write access control with data and
 /// metadata encrypted.
 pub fn governance_xml() -> String {
+    let domains = domains();
     format!(
         r#"<?xml version="1.0" encoding="UTF-8"?>
 <dds xmlns:xsi="http://www.w3.org/2001/XMLSchema-instance" xsi:noNamespaceSchemaLocation="http://www.omg.org/spec/DDS-SECURITY/20170901/omg_shared_ca_governance.xsd">
   <domain_access_rules>
     <domain_rule>
-      <domains>{DOMAINS}</domains>
+      <domains>{domains}</domains>
       <allow_unauthenticated_participants>false</allow_unauthenticated_participants>
       <enable_join_access_control>true</enable_join_access_control>
       <discovery_protection_kind>ENCRYPT</discovery_protection_kind>
@@ -73,6 +82,7 @@ pub fn permissions_xml(
             .map(|t| format!("            <topic>{}</topic>\n", esc(t)))
             .collect()
     };
+    let domains = domains();
     format!(
         r#"<?xml version="1.0" encoding="UTF-8"?>
 <dds xmlns:xsi="http://www.w3.org/2001/XMLSchema-instance" xsi:noNamespaceSchemaLocation="http://www.omg.org/spec/DDS-SECURITY/20170901/omg_shared_ca_permissions.xsd">
@@ -84,7 +94,7 @@ pub fn permissions_xml(
         <not_after>{na}</not_after>
       </validity>
       <allow_rule>
-        <domains>{DOMAINS}</domains>
+        <domains>{domains}</domains>
         <publish>
           <topics>
 {publish}          </topics>
@@ -129,6 +139,24 @@ mod tests {
         assert!(x.contains("<not_after>2023-11-15T22:13:20Z</not_after>"));
         assert!(x.contains("<topic>rt/robot_3/cmd_vel</topic>"));
         assert!(x.contains("<default>DENY</default>"));
+    }
+
+    /// Cyclone DDS 0.10's access control refuses to parse a document with a domain id
+    /// above 230 (governance: code 137, permissions: 138); 232 was here before.
+    #[test]
+    fn documents_name_no_domain_above_230() {
+        let nb = OffsetDateTime::from_unix_timestamp(1_700_000_000).unwrap();
+        let p = permissions_xml("/x", "CN=/x", nb, nb, &Role::Bridge.grant());
+        for doc in [governance_xml(), p] {
+            assert!(
+                doc.contains("<domains><id_range><min>0</min><max>230</max></id_range></domains>"),
+                "{doc}"
+            );
+            for (i, _) in doc.match_indices("<max>") {
+                let v: u32 = doc[i + 5..].split('<').next().unwrap().parse().unwrap();
+                assert!(v <= 230, "{doc}");
+            }
+        }
     }
 
     #[test]

@@ -34,6 +34,15 @@ pub fn context_with(domain_id: u16, security: &Security) -> Result<Context> {
     match security {
         Security::Off => Context::with_options(opts).map_err(dds_err("DDS context")),
         Security::Enclave { enclave, dir } => {
+            if domain_id > msgs::enclave::MAX_SECURE_DOMAIN {
+                anyhow::bail!(
+                    "DDS Security: domain {domain_id} is above {max}, the last domain a \
+                     keystore's governance and permissions cover (Cyclone DDS reads no \
+                     document naming a domain above 230); use ROS_DOMAIN_ID 0..={max}; \
+                     refusing to start",
+                    max = msgs::enclave::MAX_SECURE_DOMAIN
+                );
+            }
             // Our keys are not password-protected (as SROS2's); the files are the
             // rmw_dds_common names, which ros2-client's security option reads.
             let opts = opts.enable_security(dir, String::new());
