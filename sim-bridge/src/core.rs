@@ -3,14 +3,17 @@
 
 use std::collections::{BTreeMap, HashMap};
 
-use msgs::{
-    ColorRGBA, DiagnosticArray, DiagnosticStatus, Header, KeyValue, Marker, MarkerArray, Pose,
-    Time, Twist, Vector3,
-};
+use msgs::{Time, Twist};
 use serde::Serialize;
 use sim::{Env, MachineId, RobotId, ScenarioConfig, StorageId};
 
 use crate::params::{BridgeParams, Mode};
+
+/// The RTPS writer GUID of a sample (`MessageInfo::publisher_gid().to_bytes16()`).
+pub type WriterId = [u8; 16];
+
+/// The writer [`Core::on_cmd`] attributes its commands to (callers that do not know it).
+pub const DEFAULT_WRITER: WriterId = [0; 16];
 
 /// A robot body and the latest command for it.
 #[derive(Debug, Clone)]
@@ -24,6 +27,11 @@ pub struct RobotSlot {
     pub created_at: f64,
     /// Spawned from the setup at start-up (gets the start-up grace period).
     pub initial: bool,
+    /// Realtime: held at zero velocity since its latest command passed the command
+    /// timeout (`cmd_vel_timeout_s`); cleared by the next command.
+    pub timed_out: bool,
+    /// The writer its cmd_vel is pinned to (the first valid one; see [`Core::on_cmd_from`]).
+    pub writer: Option<WriterId>,
 }
 
 #[derive(Debug, Clone, Default, Serialize, PartialEq, Eq)]
@@ -47,6 +55,19 @@ pub struct BridgeCounters {
     /// Lockstep: a state published again because some robot had not answered it after
     /// `lockstep_resend_s` (docs/adr/0029-lockstep-resends.md).
     pub state_resends: u64,
+    /// Realtime: robot-steps a body was commanded zero velocity because its latest
+    /// cmd_vel was older than `cmd_vel_timeout_s` (a dead or stalled robot_node; ADR 0031).
+    pub cmd_timeout_steps: u64,
+    /// Realtime: times a body's commands timed out (it was stopped).
+    pub cmd_timeouts: u64,
+    /// cmd_vel samples refused because they came from a second writer on a robot's topic
+    /// while the robot's pinned writer was still commanding it: another fleet's robot of
+    /// the same name, or any other node, on this domain (ADR 0032). `tending fleet`
+    /// fails a run in which this is not zero.
+    pub cmds_foreign_writer: u64,
+    /// A robot's cmd_vel taken over by a new writer after the pinned one fell silent (a
+    /// restarted robot_node).
+    pub cmd_writer_changes: u64,
     pub commands_ok: u64,
     pub commands_failed: u64,
     /// Realtime: robot-steps by the age of the state the applied command answers, in
@@ -100,6 +121,8 @@ pub enum CmdOutcome {
     DroppedLate,
     /// Lockstep: a copy of the answer to an older state the robot already gave.
     DroppedRepeated,
+    /// From a writer other than the one the robot's commands are pinned to.
+    DroppedForeignWriter,
     SpawnFailed(String),
 }
 
@@ -121,6 +144,7 @@ pub fn key_of(t: &Time) -> i64 {
 
 impl Core {
     pub fn new(p: BridgeParams, now: f64) -> anyhow::Result<Self> {
+        p.check()?;
         let cfg = match &p.config {
             Some(path) => ScenarioConfig::load(path)
                 .map_err(|e| anyhow::anyhow!("scenario config {}: {e}", path.display()))?,
@@ -143,6 +167,8 @@ impl Core {
                         last_cmd_at: None,
                         created_at: now,
                         initial: true,
+                        timed_out: false,
+                        writer: None,
                     },
                 );
             }
@@ -181,8 +207,35 @@ impl Core {
     }
 
     /// A cmd_vel from namespace `name` (without slash), stamped `stamp` (source timestamp
-    /// key), received at wall time `now`.
+    /// key), received at wall time `now`, from [`DEFAULT_WRITER`].
     pub fn on_cmd(&mut self, name: &str, t: &Twist, stamp: Option<i64>, now: f64) -> CmdOutcome {
+        self.on_cmd_from(name, t, stamp, DEFAULT_WRITER, now)
+    }
+
+    /// How long a robot's pinned writer must have been silent before another writer may
+    /// take over its cmd_vel: realtime, the command timeout (the body has stopped by then);
+    /// lockstep, which keeps a body without commands until the stale timeout, that.
+    fn pin_release_s(&self) -> f64 {
+        match self.p.mode {
+            Mode::Realtime => self.p.cmd_vel_timeout_s,
+            Mode::Lockstep => self.p.stale_timeout_s,
+        }
+    }
+
+    /// [`Self::on_cmd`] from `writer` (the sample's RTPS writer GUID). A robot's cmd_vel
+    /// is pinned to one writer, as robot_node pins its inputs (ADR 0004): the first valid
+    /// command pins its writer; another writer's commands are refused while the pinned one
+    /// commanded within [`Self::pin_release_s`] (counted, `cmds_foreign_writer`), and take
+    /// over after that (`cmd_writer_changes`). Two writers on one robot's cmd_vel are two
+    /// controllers: another fleet's robot of the same name on this domain (ADR 0032).
+    pub fn on_cmd_from(
+        &mut self,
+        name: &str,
+        t: &Twist,
+        stamp: Option<i64>,
+        writer: WriterId,
+        now: f64,
+    ) -> CmdOutcome {
         if msgs::validate::twist(t).is_err() {
             self.counters.cmds_dropped_non_finite += 1;
             return CmdOutcome::DroppedNonFinite;
@@ -208,6 +261,20 @@ impl Core {
                 }
             }
         }
+        let release = self.pin_release_s();
+        let slot = self.robots.get_mut(name).expect("present or spawned");
+        match slot.writer {
+            None => slot.writer = Some(writer),
+            Some(w) if w == writer => {}
+            Some(_) if slot.last_cmd_at.is_none_or(|at| now - at > release) => {
+                slot.writer = Some(writer);
+                self.counters.cmd_writer_changes += 1;
+            }
+            Some(_) => {
+                self.counters.cmds_foreign_writer += 1;
+                return CmdOutcome::DroppedForeignWriter;
+            }
+        }
         if self.p.mode == Mode::Lockstep {
             if let Some((key, _, _)) = &self.published {
                 if stamp.is_some_and(|s| s < *key) {
@@ -226,6 +293,7 @@ impl Core {
         slot.cmd = v;
         slot.cmd_stamp = stamp;
         slot.last_cmd_at = Some(now);
+        slot.timed_out = false;
         self.counters.cmds_accepted += 1;
         outcome
     }
@@ -246,6 +314,8 @@ impl Core {
                 last_cmd_at: None,
                 created_at: now,
                 initial: false,
+                timed_out: false,
+                writer: None,
             },
         );
         self.counters.spawned += 1;
@@ -315,32 +385,49 @@ impl Core {
         self.counters.state_resends += 1;
     }
 
-    /// One simulator step with the current commands. Lockstep: a robot's command counts
-    /// only if it answers the published state (else zero); realtime: the latest command
-    /// unless older than the stale timeout.
-    pub fn step(&mut self, now: f64, timed_out: bool) -> anyhow::Result<()> {
+    /// One simulator step with the current commands; returns the robots whose commands
+    /// timed out at this step (realtime: stopped now, see [`Self::command_of`]).
+    pub fn step(&mut self, now: f64, timed_out: bool) -> anyhow::Result<Vec<String>> {
         if timed_out {
             self.counters.lockstep_timeouts += 1;
         }
+        let ids: Vec<RobotId> = self.env.robot_ids().to_vec();
+        let mut cmds = Vec::with_capacity(ids.len());
+        let mut stopped = Vec::new();
+        for id in ids {
+            let name = self.names[&id].clone();
+            let (cmd, stopped_now) = self.command_of(&name, now);
+            if stopped_now {
+                stopped.push(name);
+            }
+            cmds.push(cmd);
+        }
+        self.env.step_velocities(&cmds)?;
+        Ok(stopped)
+    }
+
+    /// The velocity robot `name` is commanded at this step, and whether its commands
+    /// timed out just now. Lockstep: its command only if it answers the published state
+    /// (else zero). Realtime: its latest command while at most `cmd_vel_timeout_s` old;
+    /// zero after, so that the body brakes to a stop (the simulator's velocity tracker
+    /// brakes a zero command within a step or two), as a base controller does on its
+    /// command timeout; the body is removed later, at `stale_timeout_s` ([`Self::expire`]).
+    fn command_of(&mut self, name: &str, now: f64) -> ([f32; 2], bool) {
         let key = self.published.as_ref().map(|p| p.0);
         let now_key = self.stamp_key();
         let dt_us = (self.env.config().world.dt as f64 * 1e6).max(1.0);
-        let cmds: Vec<[f32; 2]> = self
-            .env
-            .robot_ids()
-            .iter()
-            .map(|id| {
-                let s = &self.robots[&self.names[id]];
-                let ok = match self.p.mode {
-                    Mode::Lockstep => key.is_some() && s.cmd_stamp == key,
-                    Mode::Realtime => s
-                        .last_cmd_at
-                        .is_some_and(|t| now - t <= self.p.stale_timeout_s),
-                };
-                if ok && self.p.mode == Mode::Realtime {
+        let (mode, timeout) = (self.p.mode, self.p.cmd_vel_timeout_s);
+        let s = self.robots.get_mut(name).expect("every body has a slot");
+        let c = &mut self.counters;
+        match mode {
+            Mode::Lockstep => {
+                let ok = key.is_some() && s.cmd_stamp == key;
+                (if ok { s.cmd } else { [0.0; 2] }, false)
+            }
+            Mode::Realtime => match s.last_cmd_at {
+                Some(t) if now - t <= timeout => {
                     if let Some(k) = s.cmd_stamp {
                         let age = ((now_key - k) as f64 / dt_us).round().max(0.0) as u64;
-                        let c = &mut self.counters;
                         *match age {
                             0 => &mut c.cmd_age_0,
                             1 => &mut c.cmd_age_1,
@@ -348,16 +435,20 @@ impl Core {
                             _ => &mut c.cmd_age_3plus,
                         } += 1;
                     }
+                    (s.cmd, false)
                 }
-                if ok {
-                    s.cmd
-                } else {
-                    [0.0; 2]
+                Some(_) => {
+                    c.cmd_timeout_steps += 1;
+                    let first = !s.timed_out;
+                    if first {
+                        s.timed_out = true;
+                        c.cmd_timeouts += 1;
+                    }
+                    ([0.0; 2], first)
                 }
-            })
-            .collect();
-        self.env.step_velocities(&cmds)?;
-        Ok(())
+                None => ([0.0; 2], false),
+            },
+        }
     }
 
     /// A `/tending/command` line; returns a description of what was done.
@@ -489,133 +580,6 @@ impl Core {
             .map(|r| (self.names[&r.id].clone(), r.pos, r.has_part))
             .collect()
     }
-
-    pub fn diagnostics(&self) -> DiagnosticArray {
-        let m = self.metrics();
-        let kv = |k: &str, v: String| KeyValue {
-            key: k.into(),
-            value: v,
-        };
-        DiagnosticArray {
-            header: Header {
-                stamp: self.stamp(),
-                frame_id: String::new(),
-            },
-            status: vec![DiagnosticStatus {
-                level: DiagnosticStatus::OK,
-                name: "tending/metrics".into(),
-                message: format!(
-                    "{} delivered, MU {:.3}, {} collisions",
-                    m.parts_delivered, m.mu, m.collisions
-                ),
-                hardware_id: "sim_bridge".into(),
-                values: vec![
-                    kv("parts_delivered", m.parts_delivered.to_string()),
-                    kv("parts_collected", m.parts_collected.to_string()),
-                    kv("collisions", m.collisions.to_string()),
-                    kv(
-                        "collisions_robot_robot",
-                        m.collisions_robot_robot.to_string(),
-                    ),
-                    kv(
-                        "collisions_robot_machine",
-                        m.collisions_robot_machine.to_string(),
-                    ),
-                    kv(
-                        "collisions_robot_storage",
-                        m.collisions_robot_storage.to_string(),
-                    ),
-                    kv("collisions_robot_wall", m.collisions_robot_wall.to_string()),
-                    kv("machine_utilization", format!("{:.4}", m.mu)),
-                    kv("p_max", m.p_max.to_string()),
-                    kv("robots", m.robots.to_string()),
-                    kv("step", m.step.to_string()),
-                    kv(
-                        "lockstep_timeouts",
-                        m.counters.lockstep_timeouts.to_string(),
-                    ),
-                    kv(
-                        "cmds_dropped",
-                        (m.counters.cmds_dropped_non_finite + m.counters.cmds_dropped_decode)
-                            .to_string(),
-                    ),
-                ],
-            }],
-        }
-    }
-
-    /// Robots red cylinders, machines green cubes (dimmer when no part is ready), storages
-    /// blue cubes, as in the paper's figures. DELETEALL first so removed bodies vanish.
-    pub fn markers(&self) -> MarkerArray {
-        let header = Header {
-            stamp: self.stamp(),
-            frame_id: msgs::topics::FRAME_ID.into(),
-        };
-        let mut markers = vec![Marker {
-            header: header.clone(),
-            action: Marker::DELETEALL,
-            ..Default::default()
-        }];
-        let mk = |ns: &str, id: u32, ty: i32, c: [f32; 2], scale: [f64; 3], color: ColorRGBA| {
-            let mut pose = Pose::default();
-            pose.position.x = c[0] as f64;
-            pose.position.y = c[1] as f64;
-            pose.position.z = scale[2] / 2.0;
-            Marker {
-                header: header.clone(),
-                ns: ns.into(),
-                id: id as i32,
-                type_: ty,
-                action: Marker::ADD,
-                pose,
-                scale: Vector3 {
-                    x: scale[0],
-                    y: scale[1],
-                    z: scale[2],
-                },
-                color,
-                ..Default::default()
-            }
-        };
-        let rgba = |r, g, b, a| ColorRGBA { r, g, b, a };
-        let d = 2.0 * self.env.sizes().robot_radius as f64;
-        for r in self.env.robots() {
-            let c = if r.has_part {
-                rgba(1.0, 0.5, 0.5, 1.0)
-            } else {
-                rgba(0.9, 0.1, 0.1, 1.0)
-            };
-            markers.push(mk(
-                "robots",
-                r.id.0,
-                Marker::CYLINDER,
-                r.pos,
-                [d, d, 0.1],
-                c,
-            ));
-        }
-        for m in self.env.machines() {
-            let c = if m.part_ready {
-                rgba(0.1, 0.8, 0.1, 1.0)
-            } else {
-                rgba(0.1, 0.5, 0.1, 0.6)
-            };
-            let s = [2.0 * m.half[0] as f64, 2.0 * m.half[1] as f64, 0.2];
-            markers.push(mk("machines", m.id.0, Marker::CUBE, m.centre, s, c));
-        }
-        for s in self.env.storages() {
-            let sc = [2.0 * s.half[0] as f64, 2.0 * s.half[1] as f64, 0.05];
-            markers.push(mk(
-                "storages",
-                s.id.0,
-                Marker::CUBE,
-                s.centre,
-                sc,
-                rgba(0.1, 0.2, 0.9, 1.0),
-            ));
-        }
-        MarkerArray { markers }
-    }
 }
 
 fn valid_name(s: &str) -> bool {
@@ -629,3 +593,4 @@ fn valid_name(s: &str) -> bool {
 
 #[cfg(test)]
 mod tests;
+mod view;

@@ -16,7 +16,7 @@ use msgs::{
 };
 use ros::{publisher, stamp_key_info, subscription, RosNode, StampedWriter};
 
-use crate::core::{Core, MetricsLine};
+use crate::core::{CmdOutcome, Core, MetricsLine, WriterId};
 use crate::delay::DelayQueue;
 use crate::params::{BridgeParams, Mode};
 use crate::watchdog::{NodeStage, Watchdog};
@@ -339,8 +339,9 @@ struct Bridge<'a> {
     out: Outputs,
     rec: Option<Recorder>,
     stdin_rx: Option<std::sync::mpsc::Receiver<String>>,
-    /// test_cmd_delay_ms: received commands waiting to reach the core.
-    delayed: DelayQueue<(String, Twist, Option<i64>)>,
+    /// test_cmd_delay_ms: received commands (robot, command, stamp, writer) waiting to
+    /// reach the core.
+    delayed: DelayQueue<(String, Twist, Option<i64>, WriterId)>,
     /// test_state_delay_ms: state frames waiting to be published.
     state_q: DelayQueue<StateFrame>,
     /// The robots of the setup: lockstep starts once all their cmd_vel are discovered.
@@ -435,12 +436,14 @@ impl<'a> Bridge<'a> {
             b.all_discovered_at = Some(t_start);
         }
         info!(
-            "sim_bridge up: setup {}, seed {}, mode {:?}, {} Hz, {} robots",
+            "sim_bridge up: setup {}, seed {}, mode {:?}, {} Hz, {} robots, cmd_vel timeout {} s (realtime), stale timeout {} s",
             p.setup,
             p.seed,
             p.mode,
             p.rate_hz,
-            b.core.env.n_robots()
+            b.core.env.n_robots(),
+            p.cmd_vel_timeout_s,
+            p.stale_timeout_s
         );
         // Writers exist from the start, so readers have matched them before the first state
         // (a volatile sample sent before matching is lost).
@@ -522,19 +525,21 @@ impl<'a> Bridge<'a> {
                             r.put(&robot(name, Leaf::CmdVel).ros_name(), &tw);
                         }
                         let stamp = stamp_key_info(&info);
+                        let writer = info.publisher_gid().to_bytes16();
                         if self.delayed.is_active() {
-                            self.delayed.push(Instant::now(), (name.clone(), tw, stamp));
+                            let item = (name.clone(), tw, stamp, writer);
+                            self.delayed.push(Instant::now(), item);
                             continue;
                         }
-                        on_cmd(self.core, name, &tw, stamp, t);
+                        on_cmd(self.core, name, &tw, stamp, writer, t);
                     }
                     Ok(None) => break,
                     Err(_) => self.core.on_undecodable_cmd(),
                 }
             }
         }
-        while let Some((name, tw, stamp)) = self.delayed.pop_due(Instant::now()) {
-            on_cmd(self.core, &name, &tw, stamp, t);
+        while let Some((name, tw, stamp, writer)) = self.delayed.pop_due(Instant::now()) {
+            on_cmd(self.core, &name, &tw, stamp, writer, t);
         }
         let mut lines: Vec<String> = Vec::new();
         while let Ok(Some((line, _))) = self.command_sub.take() {
@@ -629,7 +634,12 @@ impl<'a> Bridge<'a> {
         for n in self.core.expire(t) {
             info!("removed /{n}: cmd_vel stale");
         }
-        self.core.step(t, false)?;
+        for n in self.core.step(t, false)? {
+            warn!(
+                "/{n}: no cmd_vel for {} s (cmd_vel_timeout_s): commanding zero velocity",
+                self.p.cmd_vel_timeout_s
+            );
+        }
         self.publish_state(true)
     }
 
@@ -718,9 +728,25 @@ impl<'a> Bridge<'a> {
     }
 }
 
-/// A cmd_vel to the core (logging a robot it spawned).
-fn on_cmd(core: &mut Core, name: &str, tw: &Twist, stamp: Option<i64>, t: f64) {
-    if let crate::core::CmdOutcome::Spawned(id) = core.on_cmd(name, tw, stamp, t) {
-        info!("spawned a body (id {}) for /{name}", id.0);
+/// A cmd_vel from `writer` to the core (logging a robot it spawned, and the first and
+/// every power of two of the samples refused from a second writer).
+fn on_cmd(core: &mut Core, name: &str, tw: &Twist, stamp: Option<i64>, writer: WriterId, t: f64) {
+    let changes = core.counters.cmd_writer_changes;
+    match core.on_cmd_from(name, tw, stamp, writer, t) {
+        CmdOutcome::Spawned(id) => info!("spawned a body (id {}) for /{name}", id.0),
+        CmdOutcome::DroppedForeignWriter => {
+            let n = core.counters.cmds_foreign_writer;
+            if n.is_power_of_two() {
+                warn!(
+                    "/{name}/cmd_vel: refused a command from a second writer ({n} so far): \
+                     another fleet's robot or another node commands /{name} on ROS domain {}",
+                    core.p.node.domain_id
+                );
+            }
+        }
+        _ if core.counters.cmd_writer_changes > changes => {
+            info!("/{name}/cmd_vel: a new writer took over (the previous one fell silent)")
+        }
+        _ => {}
     }
 }

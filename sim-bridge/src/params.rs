@@ -12,6 +12,8 @@ pub const DEFAULT_NODE_NAME: &str = "sim_bridge";
 
 pub const USAGE: &str = "usage: sim_bridge [--ros-args [-p NAME:=VALUE]... [--params-file FILE.yaml]...]
 parameters: setup (6.4_2), seed (0), mode (realtime|lockstep), rate_hz (10), stale_timeout_s (2.0),
+            cmd_vel_timeout_s (0.5: realtime, a body whose latest cmd_vel is older is commanded zero
+            velocity, like a base controller's command timeout; must be < stale_timeout_s),
             config (scenario TOML; default: built-in), spawn_initial (true), max_steps (0 = run until stopped),
             lockstep_timeout_s (2.0), lockstep_resend_s (0.5: publish a state again while a robot
             has not answered it; 0 = never), startup_grace_s (10.0), settle_s (2.0), metrics_period_s (1.0),
@@ -49,6 +51,11 @@ pub struct BridgeParams {
     pub rate_hz: f64,
     /// A robot body whose cmd_vel is older than this (wall seconds) is removed.
     pub stale_timeout_s: f64,
+    /// Realtime: a body whose latest cmd_vel is older than this (wall seconds) is commanded
+    /// zero velocity (it brakes to a stop), as a ROS 2 base controller does on its
+    /// `cmd_vel_timeout`; it is removed later, at `stale_timeout_s`. Must be below it
+    /// (docs/adr/0031-command-timeout.md). Lockstep ignores it (it waits for commands).
+    pub cmd_vel_timeout_s: f64,
     pub config: Option<PathBuf>,
     pub spawn_initial: bool,
     /// Stop after this many steps (0: run until stopped).
@@ -97,6 +104,7 @@ impl Default for BridgeParams {
             mode: Mode::Realtime,
             rate_hz: 10.0,
             stale_timeout_s: 2.0,
+            cmd_vel_timeout_s: 0.5,
             config: None,
             spawn_initial: true,
             max_steps: 0,
@@ -132,7 +140,25 @@ where
         ..BridgeParams::default()
     };
     let (p, _, warnings) = parse_params(args, ros_domain_id, DEFAULT_NODE_NAME, init, apply_param)?;
+    p.check()?;
     Ok((p, warnings))
+}
+
+impl BridgeParams {
+    /// Constraints between parameters (each one alone is checked as it is parsed).
+    pub fn check(&self) -> Result<(), ArgError> {
+        if self.cmd_vel_timeout_s >= self.stale_timeout_s {
+            return Err(param_error(
+                "cmd_vel_timeout_s",
+                format!(
+                    "must be below stale_timeout_s ({}): a body stops at the command timeout \
+                     and is removed at the staleness timeout, got {}",
+                    self.stale_timeout_s, self.cmd_vel_timeout_s
+                ),
+            ));
+        }
+        Ok(())
+    }
 }
 
 /// Set parameter `name`; false if it is not one of `sim_bridge`'s.
@@ -158,6 +184,7 @@ fn apply_param(p: &mut BridgeParams, n: &str, v: &ParamValue) -> Result<bool, Ar
         }
         "rate_hz" => p.rate_hz = rate_hz(n, v)?,
         "stale_timeout_s" => p.stale_timeout_s = positive(n, v)?,
+        "cmd_vel_timeout_s" => p.cmd_vel_timeout_s = positive(n, v)?,
         "lockstep_timeout_s" => p.lockstep_timeout_s = positive(n, v)?,
         "lockstep_resend_s" => p.lockstep_resend_s = non_negative(n, v)?,
         "startup_grace_s" => p.startup_grace_s = non_negative(n, v)?,
@@ -260,6 +287,25 @@ mod tests {
             "stall_timeout_s:=.inf",
         ] {
             assert!(parse(["--ros-args", "-p", bad], None).is_err(), "{bad}");
+        }
+    }
+
+    #[test]
+    fn the_command_timeout_defaults_to_half_a_second_and_stays_below_the_stale_timeout() {
+        let (p, _) = parse(Vec::<String>::new(), None).unwrap();
+        assert_eq!((p.cmd_vel_timeout_s, p.stale_timeout_s), (0.5, 2.0));
+        let (p, _) = parse(["--ros-args", "-p", "cmd_vel_timeout_s:=0.25"], None).unwrap();
+        assert_eq!(p.cmd_vel_timeout_s, 0.25);
+        for bad in [
+            &["-p", "cmd_vel_timeout_s:=0"][..],
+            &["-p", "cmd_vel_timeout_s:=-1"],
+            &["-p", "cmd_vel_timeout_s:=2.0"],
+            &["-p", "stale_timeout_s:=0.4"],
+            &["-p", "cmd_vel_timeout_s:=1.5", "-p", "stale_timeout_s:=1.0"],
+        ] {
+            let args = std::iter::once("--ros-args").chain(bad.iter().copied());
+            let e = parse(args, None).unwrap_err().to_string();
+            assert!(e.contains("cmd_vel_timeout_s"), "{bad:?}: {e}");
         }
     }
 

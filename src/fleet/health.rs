@@ -1,6 +1,9 @@
 //! Is the fleet working? From the bridge's metrics lines: do the robots receive state and
-//! act on it (`robots_on_state`), and does the bridge step at its rate. A run that loses
-//! its robots or delivers nothing says so and fails, instead of exiting 0.
+//! act on it (`robots_on_state`), does the bridge step at its rate, and do its robots take
+//! commands from their own nodes only (`cmds_foreign_writer`: a second writer on a robot's
+//! cmd_vel is another fleet or node on the domain, ADR 0032). A run that loses its robots,
+//! delivers nothing or was commanded by someone else says so and fails, instead of
+//! exiting 0.
 
 use std::time::Duration;
 
@@ -22,6 +25,8 @@ pub struct Sample {
     /// Robots whose process has been up longer than the start-up grace.
     pub robots_expected: usize,
     pub delivered: u64,
+    /// cmd_vel samples the bridge refused from a second writer on a robot's topic, so far.
+    pub foreign_cmds: u64,
 }
 
 /// The current problems, empty when healthy.
@@ -53,6 +58,8 @@ pub struct Health {
     checked_for: Duration,
     /// The worst stretch seen: longest unhealthy duration and its problems.
     worst: Option<(Duration, Problems)>,
+    /// The most cmd_vel samples from second writers reported (the counter only grows).
+    foreign_cmds: u64,
 }
 
 impl Health {
@@ -66,6 +73,7 @@ impl Health {
             healthy_for: Duration::ZERO,
             checked_for: Duration::ZERO,
             worst: None,
+            foreign_cmds: 0,
         }
     }
 
@@ -78,6 +86,10 @@ impl Health {
                 s.robots_expected - s.robots_on_state,
                 s.robots_expected
             ));
+        }
+        self.foreign_cmds = self.foreign_cmds.max(s.foreign_cmds);
+        if self.foreign_cmds > 0 {
+            p.push(foreign_problem(self.foreign_cmds));
         }
         if let (Some(rate), Some(prev)) = (self.rate_hz, self.prev) {
             let dt = s.wall.saturating_sub(prev.wall).as_secs_f64();
@@ -148,6 +160,10 @@ impl Health {
         let Some(last) = self.last else {
             return Some("no metrics from sim_bridge".into());
         };
+        // however briefly: a robot of this fleet was commanded from outside it
+        if self.foreign_cmds > 0 {
+            return Some(foreign_problem(self.foreign_cmds));
+        }
         let now = self.persistent();
         if !now.0.is_empty() {
             return Some(format!("unhealthy at the end of the run: {now}"));
@@ -188,6 +204,14 @@ impl Health {
     }
 }
 
+/// The problem of cmd_vel from second writers.
+fn foreign_problem(n: u64) -> String {
+    format!(
+        "{n} cmd_vel samples from a second writer on a robot's topic (another fleet or node \
+         on this ROS domain commands robots of the same names)"
+    )
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -200,6 +224,7 @@ mod tests {
             robots_on_state: on,
             robots_expected: expected,
             delivered,
+            foreign_cmds: 0,
         }
     }
 
@@ -293,5 +318,22 @@ mod tests {
         assert_eq!(h.persistent(), Problems::default());
         assert!(h.verdict().unwrap().contains("no part delivered"));
         assert!(Health::new(None).verdict().unwrap().contains("no metrics"));
+    }
+
+    #[test]
+    fn commands_from_a_second_writer_fail_the_run_at_once() {
+        let mut h = Health::new(Some(10.0));
+        for t in 0..30 {
+            let mut s = at(t, t * 10, 6, 6, t / 5);
+            // one burst of 4 foreign commands at 10 s; the counter stays
+            s.foreign_cmds = if t >= 10 { 4 } else { 0 };
+            let p = h.observe(s);
+            assert_eq!(p.0.is_empty(), t < 10, "{t}: {p}");
+        }
+        assert!(h
+            .status()
+            .contains("4 cmd_vel samples from a second writer"));
+        let v = h.verdict().unwrap();
+        assert!(v.contains("another fleet"), "{v}");
     }
 }

@@ -19,6 +19,7 @@
 //! stepping at its rate, nothing delivered).
 
 mod children;
+mod domain;
 mod health;
 mod layout;
 mod live;
@@ -60,9 +61,15 @@ pub struct FleetArgs {
     pub seed: u64,
     #[arg(long, default_value_t = 10.0)]
     pub rate_hz: f64,
-    /// ROS_DOMAIN_ID for the fleet (default: the environment's, else 0).
+    /// ROS_DOMAIN_ID for the fleet (default: the environment's, else 0), or `auto`: the
+    /// first domain from there up with no other fleet on it (said on stderr). A domain
+    /// with another fleet on it is refused (docs/adr/0032-one-fleet-per-domain.md).
+    #[arg(long, value_parser = domain::parse_domain)]
+    pub domain: Option<domain::DomainArg>,
+    /// Seconds to watch the domain's ROS 2 graph for another fleet before starting
+    /// (default 2, or 4 with --secure: handshakes come first); 0 skips the check.
     #[arg(long)]
-    pub domain: Option<u16>,
+    pub domain_check: Option<f64>,
     /// Scenario TOML for the bridge (default: built-in).
     #[arg(long)]
     pub config: Option<PathBuf>,
@@ -77,6 +84,12 @@ pub struct FleetArgs {
     /// every robot_node's inputs.
     #[arg(long, default_value_t = 2.0)]
     pub stale_timeout: f64,
+    /// Command timeout (s) of the bridge (`cmd_vel_timeout_s`): a body whose cmd_vel is
+    /// older is commanded zero velocity and brakes to a stop, like a base controller's
+    /// command timeout; it is removed at --stale-timeout. Must be below --stale-timeout
+    /// (docs/adr/0031-command-timeout.md). Realtime only; lockstep waits for commands.
+    #[arg(long, default_value_t = 0.5)]
+    pub cmd_vel_timeout: f64,
     /// Robots hosted per robot_node process (each keeps its own controller and cmd_vel).
     /// Default: one per robot up to 10 processes per core; a larger fleet runs as 2
     /// processes per core (on 2 cores: 100 robots as 4 processes of 25). With --secure, one
@@ -130,13 +143,17 @@ struct Fleet {
     next_robot: usize,
     /// Why the run ended early, if it did.
     failure: Option<String>,
+    /// Holds this fleet's node on its domain while it runs (another fleet sees it).
+    _guard: domain::Guard,
     /// The bridge ended by itself (lockstep `max_steps`).
     bridge_finished: bool,
 }
 
 pub fn run(a: FleetArgs) -> Result<()> {
     let stop = ros::stop_flag()?;
-    let mut fleet = Fleet::start(Plan::new(a)?)?;
+    let mut plan = Plan::new(a)?;
+    let guard = plan.claim_domain()?;
+    let mut fleet = Fleet::start(plan, guard)?;
     fleet.supervise(&stop);
     fleet.finish()
 }
@@ -157,7 +174,7 @@ fn stdin_lines(read: bool) -> Receiver<String> {
 }
 
 impl Fleet {
-    fn start(plan: Plan) -> Result<Fleet> {
+    fn start(plan: Plan, guard: domain::Guard) -> Result<Fleet> {
         let names: Vec<String> = (0..plan.setup.robots)
             .map(|i| format!("robot_{i}"))
             .collect();
@@ -206,6 +223,7 @@ impl Fleet {
             restarts: BTreeMap::new(),
             failure: None,
             bridge_finished: false,
+            _guard: guard,
         })
     }
 
@@ -274,6 +292,7 @@ impl Fleet {
             robots_on_state: u("robots_on_state") as usize,
             robots_expected: self.robots_expected(),
             delivered: u("parts_delivered"),
+            foreign_cmds: u("cmds_foreign_writer"),
         };
         self.health.observe(sample);
         println!(

@@ -11,6 +11,7 @@ use std::time::Instant;
 use anyhow::{anyhow, bail, Context, Result};
 
 use super::children::{BridgeProc, RobotProc};
+use super::domain::{self, DomainArg, Guard, MAX_DOMAIN};
 use super::{layout, FleetArgs, BRIDGE};
 
 /// The bridge's `startup_grace_s` with DDS Security (its default is 10 s).
@@ -60,6 +61,22 @@ fn resolve_policy(p: Option<PathBuf>) -> Option<PathBuf> {
     }
 }
 
+/// `--cmd-vel-timeout` and `--stale-timeout`: a body stops at the first and is removed at
+/// the second, so the first must be shorter (the bridge refuses it too, naming its
+/// parameter; refused here once, with the flags' names).
+fn check_timeouts(cmd_vel: f64, stale: f64) -> Result<()> {
+    if !(stale.is_finite() && stale > 0.0) {
+        bail!("--stale-timeout must be a number > 0, got {stale}");
+    }
+    if !(cmd_vel.is_finite() && cmd_vel > 0.0 && cmd_vel < stale) {
+        bail!(
+            "--cmd-vel-timeout must be > 0 and below --stale-timeout ({stale} s): a robot's \
+             body stops at the command timeout and is removed at the staleness timeout; got {cmd_vel}"
+        );
+    }
+    Ok(())
+}
+
 /// Everything fixed for the run: what to start and how.
 pub(super) struct Plan {
     pub(super) a: FleetArgs,
@@ -88,6 +105,7 @@ impl Plan {
         if !(a.duration.is_finite() && a.duration > 0.0) {
             bail!("--duration must be > 0");
         }
+        check_timeouts(a.cmd_vel_timeout, a.stale_timeout)?;
         if a.robots_per_process == Some(0) {
             bail!("--robots-per-process must be at least 1");
         }
@@ -104,15 +122,22 @@ impl Plan {
             None => sim::ScenarioConfig::default(),
         };
         let sizes = *sim::Env::new(cfg.clone(), setup, a.seed)?.sizes();
-        let domain = a.domain.unwrap_or_else(|| {
+        let env_domain = || {
             std::env::var("ROS_DOMAIN_ID")
                 .ok()
                 .and_then(|d| d.trim().parse().ok())
                 .unwrap_or(0)
-        });
+        };
+        let domain = match a.domain {
+            Some(DomainArg::Id(d)) => d,
+            Some(DomainArg::Auto) | None => env_domain(),
+        };
         // the ROS 2 limit (RTPS port arithmetic): refused here once, not by every child
-        if domain > 232 {
-            bail!("ROS domain id {domain} (--domain or ROS_DOMAIN_ID) is above 232");
+        if domain > MAX_DOMAIN {
+            bail!("ROS domain id {domain} (--domain or ROS_DOMAIN_ID) is above {MAX_DOMAIN}");
+        }
+        if a.domain_check.is_some_and(|s| !(s.is_finite() && s >= 0.0)) {
+            bail!("--domain-check must be a number of seconds >= 0");
         }
         let log_dir = a.log_dir.clone().unwrap_or_else(|| {
             std::env::temp_dir().join(format!("tending-fleet-{}", std::process::id()))
@@ -144,6 +169,36 @@ impl Plan {
             per_process,
             keystore,
         })
+    }
+
+    /// Before anything starts: is the domain free of other fleets (`--domain auto`: the
+    /// first free one from there up becomes the fleet's domain)? The guard holds this
+    /// fleet's node on it while the fleet runs (not with --secure; see [`domain::claim`]).
+    pub(super) fn claim_domain(&mut self) -> Result<Guard> {
+        let mut guard = Guard::new();
+        let secure = self.keystore.is_some();
+        let for_s = self
+            .a
+            .domain_check
+            .unwrap_or(if secure { 4.0 } else { 2.0 });
+        if for_s == 0.0 {
+            eprintln!(
+                "fleet: --domain-check 0: not looking for another fleet on ROS domain {}",
+                self.domain
+            );
+            return Ok(guard);
+        }
+        let security = match &self.keystore {
+            // the bridge's identity: it reads the graph the bridge would share
+            Some(ks) => ros::Security::Enclave {
+                enclave: keystore::BRIDGE_ENCLAVE.to_string(),
+                dir: ks.enclave_dir(keystore::BRIDGE_ENCLAVE),
+            },
+            None => ros::Security::Off,
+        };
+        let auto = self.a.domain == Some(DomainArg::Auto);
+        self.domain = domain::claim(&mut guard, self.domain, auto, &security, for_s, !secure)?;
+        Ok(guard)
     }
 
     /// What the robots run, for the start-up line: the checkpoint, or the scripted
@@ -248,6 +303,7 @@ impl Plan {
             .args(["-p", &format!("mode:={}", a.mode)])
             .args(["-p", &format!("rate_hz:={}", a.rate_hz)])
             .args(["-p", &format!("stale_timeout_s:={:?}", a.stale_timeout)])
+            .args(["-p", &format!("cmd_vel_timeout_s:={:?}", a.cmd_vel_timeout)])
             .args(["-p", "stdin_commands:=true"])
             .stdin(Stdio::piped())
             .stdout(Stdio::piped())
@@ -291,5 +347,30 @@ impl Plan {
             stdin,
             started: Instant::now(),
         })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::check_timeouts;
+
+    #[test]
+    fn the_command_timeout_must_be_below_the_stale_timeout() {
+        assert!(check_timeouts(0.5, 2.0).is_ok());
+        for (c, s) in [
+            (2.0, 2.0),
+            (0.0, 2.0),
+            (0.5, 0.4),
+            (f64::NAN, 2.0),
+            (0.1, 0.0),
+        ] {
+            let e = check_timeouts(c, s).unwrap_err().to_string();
+            assert!(e.contains("-timeout"), "{c} {s}: {e}");
+        }
+        let e = check_timeouts(3.0, 2.0).unwrap_err().to_string();
+        assert!(
+            e.contains("--cmd-vel-timeout") && e.contains("--stale-timeout"),
+            "{e}"
+        );
     }
 }

@@ -2,6 +2,7 @@
 //! state, run-time commands.
 
 use super::*;
+use msgs::Marker;
 
 /// A wall-clock source timestamp key (2026-12-02, microseconds since the epoch).
 const WALL_CLOCK_US: i64 = 1_796_200_000_000_000;
@@ -200,4 +201,172 @@ fn the_realtime_start_waits_for_commands_from_state_from_initial_robots_only() {
     assert_eq!(c.initial_robots_waiting(), vec!["robot_5"]);
     c.on_cmd("robot_5", &Twist::planar(0.1, 0.0), Some(k0), 0.4);
     assert!(c.initial_robots_waiting().is_empty());
+}
+
+/// The rover's x position.
+fn rover_x(c: &Core) -> f32 {
+    c.robot_states().iter().find(|r| r.0 == "rover").unwrap().1[0]
+}
+
+/// Steps at wall times `ts`: each step's x displacement of the rover, and the times at
+/// which the step reported its commands timed out.
+fn step_rover(c: &mut Core, ts: &[f64]) -> (Vec<f32>, Vec<f64>) {
+    let (mut dx, mut stopped) = (Vec::new(), Vec::new());
+    for &t in ts {
+        let x0 = rover_x(c);
+        if c.step(t, false).unwrap() == vec!["rover".to_string()] {
+            stopped.push(t);
+        }
+        dx.push(rover_x(c) - x0);
+    }
+    (dx, stopped)
+}
+
+/// Realtime (ADR 0031): a body whose commands stop coming (its robot_node died) is
+/// commanded zero velocity once its latest command is older than `cmd_vel_timeout_s`
+/// (0.5 s) and is at rest within a step; a fresh command moves it again; it is removed at
+/// the stale timeout (1 s here) after its last command, not at the command timeout.
+#[test]
+fn a_body_stops_at_the_command_timeout_and_is_removed_at_the_stale_timeout() {
+    let mut c = core(Mode::Realtime);
+    assert_eq!((c.p.cmd_vel_timeout_s, c.p.stale_timeout_s), (0.5, 1.0));
+    c.on_cmd("rover", &Twist::planar(0.1, 0.0), None, 0.0);
+    let ts: Vec<f64> = (1..=9).map(|i| 0.1 * i as f64).collect();
+    let (dx, stopped) = step_rover(&mut c, &ts);
+    // moving while the command is at most 0.5 s old (the steps at 0.1 .. 0.5 s)
+    assert!(dx[..5].iter().all(|d| *d > 0.005), "{dx:?}");
+    // stopped at 0.6 s, reported once, and at rest from then on
+    assert_eq!(stopped, vec![ts[5]]);
+    assert!(dx[5..].iter().all(|d| d.abs() < 1e-4), "{dx:?}");
+    assert_eq!(
+        (c.counters.cmd_timeouts, c.counters.cmd_timeout_steps),
+        (1, 4)
+    );
+    // stopped, not removed: removal stays at the stale timeout
+    assert!(c.expire(0.95).is_empty());
+    assert!(c.has_robot("rover"));
+    // a fresh command moves it again
+    c.on_cmd("rover", &Twist::planar(0.1, 0.0), None, 0.95);
+    let ts: Vec<f64> = (0..10).map(|i| 1.0 + 0.1 * i as f64).collect();
+    let (dx, stopped) = step_rover(&mut c, &ts);
+    assert!(dx[..5].iter().all(|d| *d > 0.005), "{dx:?}");
+    assert_eq!(
+        stopped,
+        vec![ts[5]],
+        "stopped again 0.5 s after the fresh command"
+    );
+    assert!(dx[5..].iter().all(|d| d.abs() < 1e-4), "{dx:?}");
+    assert_eq!(c.counters.cmd_timeouts, 2);
+    assert!(c.expire(1.9).is_empty());
+    assert_eq!(c.expire(1.96), vec!["rover".to_string()]);
+}
+
+/// A base at full speed (0.5 m/s, where the velocity tracker's force cap binds) is at
+/// rest within two steps of its command timing out.
+#[test]
+fn a_body_at_full_speed_stops_within_two_steps() {
+    let mut c = core(Mode::Realtime);
+    c.on_cmd("rover", &Twist::planar(0.5, 0.0), None, 0.0);
+    c.on_cmd("rover", &Twist::planar(0.5, 0.0), None, 0.3); // keeps full speed to 0.8 s
+    let ts: Vec<f64> = (1..=12).map(|i| 0.1 * i as f64).collect();
+    let (dx, stopped) = step_rover(&mut c, &ts);
+    let k = ts.iter().position(|&t| t == stopped[0]).unwrap();
+    assert!(dx[k - 1] > 0.04, "full speed before the timeout: {dx:?}");
+    assert!(dx[k + 2..].iter().all(|d| d.abs() < 1e-4), "{dx:?}");
+}
+
+/// Lockstep waits for answers (ADR 0003/0029): an answer to the published state moves its
+/// body however much wall time passed before the step; the command timeout is realtime's.
+#[test]
+fn lockstep_ignores_the_command_timeout() {
+    let mut c = core(Mode::Lockstep);
+    c.mark_published(0.0);
+    let k0 = c.stamp_key();
+    let before = c.robot_states();
+    for i in 0..6 {
+        c.on_cmd(
+            &format!("robot_{i}"),
+            &Twist::planar(0.1, 0.0),
+            Some(k0),
+            0.1,
+        );
+    }
+    // a slow peer held the step until 0.9 s of wall time after the answers
+    assert!(c.step(1.0, false).unwrap().is_empty());
+    let after = c.robot_states();
+    for (b, a) in before.iter().zip(&after) {
+        assert!(a.1[0] > b.1[0] + 0.005, "{} did not move", a.0);
+    }
+    assert_eq!(c.counters.cmd_timeout_steps, 0);
+}
+
+#[test]
+fn a_command_timeout_not_below_the_stale_timeout_is_refused() {
+    let p = BridgeParams {
+        cmd_vel_timeout_s: 2.0,
+        ..BridgeParams::default()
+    };
+    let e = Core::new(p, 0.0).err().unwrap().to_string();
+    assert!(
+        e.contains("cmd_vel_timeout_s") && e.contains("stale_timeout_s"),
+        "{e}"
+    );
+}
+
+/// Two writers on one robot's cmd_vel (another fleet's robot of the same name on the
+/// domain, ADR 0032): the first valid writer is pinned; the second is refused and counted
+/// while the first commands, and takes over once the first has been silent for the
+/// command timeout (a restarted robot_node); in lockstep, for the stale timeout.
+#[test]
+fn a_second_writer_on_a_robots_cmd_vel_is_refused_and_counted() {
+    use CmdOutcome::*;
+    let mut c = core(Mode::Realtime);
+    let (ours, theirs) = ([1; 16], [2; 16]);
+    let go = Twist::planar(0.1, 0.0);
+    let back = Twist::planar(-0.1, 0.0);
+    let nan = Twist::planar(f64::NAN, 0.0);
+    // an invalid command pins nothing
+    assert_eq!(
+        c.on_cmd_from("robot_0", &nan, None, theirs, 0.0),
+        DroppedNonFinite
+    );
+    assert_eq!(c.on_cmd_from("robot_0", &go, None, ours, 0.0), Accepted);
+    assert_eq!(
+        c.on_cmd_from("robot_0", &back, None, theirs, 0.05),
+        DroppedForeignWriter
+    );
+    assert_eq!(c.robots["robot_0"].cmd, [0.1, 0.0]);
+    assert_eq!(c.on_cmd_from("robot_0", &go, None, ours, 0.1), Accepted);
+    // 0.45 s after ours: still pinned
+    assert_eq!(
+        c.on_cmd_from("robot_0", &back, None, theirs, 0.55),
+        DroppedForeignWriter
+    );
+    assert_eq!(c.counters.cmds_foreign_writer, 2);
+    // ours silent for more than the command timeout: the other writer takes over
+    assert_eq!(
+        c.on_cmd_from("robot_0", &back, None, theirs, 0.65),
+        Accepted
+    );
+    assert_eq!(c.counters.cmd_writer_changes, 1);
+    assert_eq!(c.robots["robot_0"].cmd, [-0.1, 0.0]);
+    assert_eq!(
+        c.on_cmd_from("robot_0", &go, None, ours, 0.7),
+        DroppedForeignWriter
+    );
+    // other robots are pinned on their own
+    assert_eq!(c.on_cmd_from("robot_1", &go, None, ours, 0.7), Accepted);
+    let json = serde_json::to_string(&c.metrics()).unwrap();
+    assert!(
+        json.contains("\"cmds_foreign_writer\":3") && json.contains("\"cmd_writer_changes\":1"),
+        "{json}"
+    );
+    // lockstep keeps the pin until the stale timeout (1 s here)
+    let mut c = core(Mode::Lockstep);
+    assert_eq!(c.on_cmd_from("robot_0", &go, None, ours, 0.0), Accepted);
+    assert_eq!(
+        c.on_cmd_from("robot_0", &go, None, theirs, 0.9),
+        DroppedForeignWriter
+    );
+    assert_eq!(c.on_cmd_from("robot_0", &go, None, theirs, 1.1), Accepted);
 }
