@@ -1,0 +1,149 @@
+"""The TorchRL env (tending.torchrl) and the BenchMARL task (tending.benchmarl).
+
+torch, torchrl and benchmarl are an optional extra (`pip install './python[torchrl]'`, a
+4-5 GB install) that CI does not install: these tests skip, saying so, when they are
+absent; `import tending` must not need them (checked always)."""
+
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+import tending
+
+SKIP = "the optional torchrl extra is not installed (pip install './python[torchrl]')"
+
+
+def need_torchrl():
+    pytest.importorskip("torch", reason=f"torch: {SKIP}")
+    pytest.importorskip("tensordict", reason=f"tensordict: {SKIP}")
+    pytest.importorskip("torchrl", reason=f"torchrl: {SKIP}")
+    from tending import torchrl as ttrl
+
+    return ttrl
+
+
+def test_import_tending_does_not_import_torch():
+    code = "import sys, tending; sys.exit(1 if 'torch' in sys.modules else 0)"
+    assert subprocess.run([sys.executable, "-c", code]).returncode == 0
+
+
+def test_check_env_specs():
+    ttrl = need_torchrl()
+    from torchrl.envs.utils import check_env_specs
+
+    for categorical in (True, False):
+        env = ttrl.TendingEnv("6.4_2", num_envs=3, seed=1, categorical_actions=categorical)
+        check_env_specs(env, break_when_any_done="both")
+    env = ttrl.TendingEnv("2.2_2", num_envs=2, seed=0)  # one peer per robot
+    check_env_specs(env)
+
+
+def test_layout_and_shapes():
+    ttrl = need_torchrl()
+    import torch
+
+    env = ttrl.TendingEnv("14.10_4", num_envs=2, seed=0)
+    assert env.batch_size == torch.Size([2]) and env.obs_dim == 3 + 30 + 8 + 39
+    td = env.rollout(3)
+    assert td["agents", "observation"].shape == (2, 3, 14, 80)
+    assert td["agents", "observation"].dtype == torch.float32
+    assert td["next", "agents", "reward"].shape == (2, 3, 14, 1)
+    assert td["agents", "action"].shape == (2, 3, 14)
+    for key in ("done", "terminated", "truncated"):
+        assert td["next", key].shape == (2, 3, 1)
+        assert td["next", "agents", key].shape == (2, 3, 14, 1)
+    assert env.group_map == {"agents": [f"robot_{i}" for i in range(14)]}
+
+
+def test_rollout_equals_the_pettingzoo_env_across_an_episode_end():
+    """Env 0 of the batch is tending.parallel_env(obs_layout='flat') with the same seed:
+    step returns an episode's final observation with done; the reset that follows (the
+    `_reset` mask step_and_maybe_reset sends) returns the next episode's first one."""
+    ttrl = need_torchrl()
+    import torch
+
+    seed, steps = 5, 203
+    env = ttrl.TendingEnv("6.4_2", num_envs=2, seed=seed)
+    pz = tending.parallel_env("6.4_2", seed=seed, obs_layout="flat")
+    rng = np.random.default_rng(0)
+    actions = torch.from_numpy(rng.integers(0, 5, size=(2, steps, 6)))
+    t = [0]
+
+    def policy(td):
+        td["agents", "action"] = actions[:, t[0]]
+        t[0] += 1
+        return td
+
+    td = env.rollout(steps, policy=policy, break_when_any_done=False)
+    obs, _ = pz.reset()
+    episode_end = None
+    for k in range(steps):
+        np.testing.assert_array_equal(td["agents", "observation"][0, k].numpy(),
+                                      np.stack([obs[a] for a in pz.agents]))
+        agents = pz.agents
+        obs, rew, term, trunc, infos = pz.step(
+            {a: int(actions[0, k, i]) for i, a in enumerate(agents)})
+        nxt = td["next"][0, k]
+        np.testing.assert_array_equal(nxt["agents", "observation"].numpy(),
+                                      np.stack([obs[a] for a in agents]))
+        np.testing.assert_array_equal(nxt["agents", "reward"][:, 0].numpy(),
+                                      np.array([rew[a] for a in agents], np.float32))
+        done = all(trunc.values())
+        assert bool(nxt["done"]) == done == bool(nxt["truncated"])
+        assert bool(nxt["agents", "done"].all()) == done and not nxt["terminated"].any()
+        m = infos[agents[0]]["metrics"]
+        if done:
+            episode_end = k
+            assert nxt["agents", "info", "parts_delivered"][0, 0] == m["parts_delivered"]
+            assert nxt["agents", "info", "collisions"][0, 0] == m["collisions"]
+            assert nxt["agents", "info", "mu"][0, 0] == pytest.approx(m["mu"])
+            obs, _ = pz.reset()  # the next episode: episode_seed(seed, 0, 1)
+        else:
+            assert not nxt["agents", "info", "parts_delivered"].any()
+    assert episode_end == env.episode_steps - 1
+
+
+def test_partial_reset_of_running_envs_is_refused_and_seed_restarts():
+    ttrl = need_torchrl()
+    import torch
+
+    env = ttrl.TendingEnv("6.4_2", num_envs=2, seed=3)
+    td = env.reset()
+    first = td["agents", "observation"].clone()
+    env.rand_step(td)
+    from tensordict import TensorDict
+
+    with pytest.raises(RuntimeError, match="mid-episode"):
+        env.reset(TensorDict({"_reset": torch.tensor([[True], [False]])}, batch_size=[2]))
+    assert torch.equal(env.reset()["agents", "observation"], first)  # restart at episode 0
+    env.set_seed(4)
+    assert not torch.equal(env.reset()["agents", "observation"], first)
+
+
+def test_greedy_through_the_torchrl_env_delivers_parts():
+    ttrl = need_torchrl()
+
+    env = ttrl.TendingEnv("6.4_2", num_envs=2, seed=0)
+    td = env.rollout(env.episode_steps,
+                     policy=lambda td: td.set(("agents", "action"), env.greedy_actions()))
+    assert td["next", "done"][:, -1].all()
+    assert (td["next", "agents", "info", "parts_delivered"][:, -1] > 10).all()
+
+
+def test_benchmarl_task():
+    need_torchrl()
+    pytest.importorskip("benchmarl", reason=f"benchmarl: {SKIP}")
+    import benchmarl.environments as envs
+    from tending import benchmarl as tb
+
+    assert envs.task_config_registry["tending/6.4_2"] is tb.TendingTask["6.4_2"]
+    task = tb.task("tending/9.6_3")
+    assert task.name == "9.6_3" and task.env_name() == "tending"
+    env = task.get_env_fun(num_envs=2, continuous_actions=False, seed=0, device="cpu")()
+    assert task.max_steps(env) == 200 and task.group_map(env)["agents"][0] == "robot_0"
+    assert list(task.observation_spec(env)["agents"].keys()) == ["observation"]
+    assert set(task.info_spec(env)["agents", "info"].keys()) == {"parts_delivered",
+                                                                "collisions", "mu"}
+    assert tb.TendingTask["6.4_2"].get_from_yaml().config == {"setup": "6.4_2"}
