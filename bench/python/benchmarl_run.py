@@ -1,0 +1,221 @@
+#!/usr/bin/env python3
+"""Train a stock BenchMARL algorithm on a tending setup (tending.benchmarl's task) and log,
+as CSV, every episode's parts delivered and team reward (training and evaluation) and every
+iteration's frames per second.
+
+    python bench/python/benchmarl_run.py --algorithm mappo --setup 6.4_2 --frames 64000 --seed 0
+
+Needs the package with its [torchrl] extra (pip install './python[torchrl]'). Everything not
+set here is BenchMARL's own default (benchmarl/conf/experiment/base_experiment.yaml and the
+algorithm's yaml); ``--set key=value`` overrides any ExperimentConfig field.
+
+Writes into --out (default target/benchmarl/<algorithm>_<setup>_seed<seed>):
+- episodes.csv: phase (train, eval, greedy), iteration, frames, wall_s, env, parts_delivered,
+  collisions, mu, team_reward (the episode's rewards summed over robots);
+- iterations.csv: iteration, frames, wall_s, iteration_s, frames_per_s (of the iteration:
+  collection, training and evaluation), episodes, mean parts_delivered and team_reward;
+- benchmarl/: BenchMARL's own CSV logs (losses, timers, rewards).
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import time
+from pathlib import Path
+
+from benchmarl.experiment import Callback
+
+ALGORITHMS = ("mappo", "ippo", "masac", "isac", "qmix", "vdn", "iql")
+ROOT = Path(__file__).resolve().parents[2]
+
+
+def algorithm_config(name: str):
+    from benchmarl import algorithms as a
+
+    return {
+        "mappo": a.MappoConfig, "ippo": a.IppoConfig, "masac": a.MasacConfig,
+        "isac": a.IsacConfig, "qmix": a.QmixConfig, "vdn": a.VdnConfig, "iql": a.IqlConfig,
+    }[name].get_from_yaml()
+
+
+def parse_value(text: str):
+    import yaml
+
+    return yaml.safe_load(text)
+
+
+def main(argv=None):
+    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    p.add_argument("--algorithm", choices=ALGORITHMS, default="mappo")
+    p.add_argument("--setup", default="6.4_2", help="N.M_K, e.g. 6.4_2 (or tending/6.4_2)")
+    p.add_argument("--frames", type=int, default=64_000,
+                   help="env steps to collect (BenchMARL frames: one per env per step)")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--n-envs", type=int, default=32, help="envs stepped together in Rust")
+    p.add_argument("--frames-per-batch", type=int, default=None,
+                   help="frames per iteration (default: one 200-step episode of every env)")
+    p.add_argument("--minibatch-iters", type=int, default=None,
+                   help="on-policy: on_policy_n_minibatch_iters (BenchMARL's default 45)")
+    p.add_argument("--optimizer-steps", type=int, default=None,
+                   help="off-policy: off_policy_n_optimizer_steps (BenchMARL's default 1000)")
+    p.add_argument("--lr", type=float, default=None, help="learning rate (BenchMARL's 5e-5)")
+    p.add_argument("--eval-every", type=int, default=5,
+                   help="evaluate every this many iterations (0: never)")
+    p.add_argument("--eval-episodes", type=int, default=10)
+    p.add_argument("--threads", type=int, default=1,
+                   help="torch threads (1 on a 2-core machine: torch's OpenMP threads spin "
+                        "and starve the simulator's rayon threads)")
+    p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                   help="any ExperimentConfig field, e.g. --set gamma=0.95")
+    p.add_argument("--out", type=Path, default=None)
+    p.add_argument("--no-greedy", action="store_true",
+                   help="skip the greedy baseline's episodes (reference rows in episodes.csv)")
+    args = p.parse_args(argv)
+
+    import torch
+
+    torch.set_num_threads(args.threads)
+    from benchmarl.experiment import Experiment, ExperimentConfig
+    from benchmarl.models.mlp import MlpConfig
+
+    import tending.benchmarl as tb
+    from tending.torchrl import TendingEnv
+
+    task = tb.task(args.setup)
+    setup = task.config["setup"]
+    out = args.out or ROOT / "target" / "benchmarl" / f"{args.algorithm}_{setup}_seed{args.seed}"
+    out.mkdir(parents=True, exist_ok=True)
+    episode_steps = TendingEnv(setup, num_envs=1).episode_steps
+    fpb = args.frames_per_batch or args.n_envs * episode_steps
+
+    algo = algorithm_config(args.algorithm)
+    cfg = ExperimentConfig.get_from_yaml()
+    cfg.sampling_device = cfg.train_device = cfg.buffer_device = "cpu"
+    cfg.max_n_frames = args.frames
+    cfg.on_policy_collected_frames_per_batch = cfg.off_policy_collected_frames_per_batch = fpb
+    cfg.on_policy_n_envs_per_worker = cfg.off_policy_n_envs_per_worker = args.n_envs
+    if args.minibatch_iters is not None:
+        cfg.on_policy_n_minibatch_iters = args.minibatch_iters
+    if args.optimizer_steps is not None:
+        cfg.off_policy_n_optimizer_steps = args.optimizer_steps
+    if args.lr is not None:
+        cfg.lr = args.lr
+    cfg.evaluation = args.eval_every > 0
+    cfg.evaluation_interval = fpb * max(args.eval_every, 1)
+    cfg.evaluation_episodes = args.eval_episodes
+    cfg.render = False
+    cfg.loggers = ["csv"]
+    cfg.create_json = False
+    cfg.checkpoint_interval = 0
+    cfg.checkpoint_at_end = False
+    cfg.save_folder = str(out / "benchmarl")
+    (out / "benchmarl").mkdir(exist_ok=True)
+    for item in args.set:
+        key, _, value = item.partition("=")
+        if not hasattr(cfg, key):
+            raise SystemExit(f"--set: ExperimentConfig has no field {key!r}")
+        setattr(cfg, key, parse_value(value))
+
+    log = CsvLog(out)
+    if not args.no_greedy:
+        # The scripted greedy baseline through the same env: the reference to beat.
+        env = TendingEnv(setup, num_envs=args.eval_episodes, seed=args.seed + 10_000)
+        td = env.rollout(episode_steps, break_when_any_done=False,
+                         policy=lambda td: td.set(("agents", "action"), env.greedy_actions()))
+        rows = list(_rollout_rows(td.unbind(0)))
+        log.episodes([["greedy", 0, 0, 0.0, e, *row] for e, row in enumerate(rows)])
+        greedy = sum(r[0] for r in rows) / len(rows)
+        print(f"greedy: {greedy:.1f} parts per episode ({args.eval_episodes} episodes)")
+
+    log.start = time.perf_counter()
+    experiment = Experiment(task=task, algorithm_config=algo, model_config=MlpConfig.get_from_yaml(),
+                            seed=args.seed, config=cfg, callbacks=[log])
+    experiment.run()
+    wall = time.perf_counter() - log.start
+    print(f"{args.algorithm} on {setup}: {experiment.total_frames} frames in {wall:.0f} s "
+          f"({experiment.total_frames / wall:.0f} frames/s overall, torch threads "
+          f"{torch.get_num_threads()}); CSV in {out}")
+
+
+class CsvLog(Callback):
+    """Appends every finished episode to episodes.csv and every iteration to
+    iterations.csv (files opened per write: BenchMARL pickles its callbacks)."""
+
+    def __init__(self, out: Path):
+        super().__init__()
+        self.out = out
+        self.start = time.perf_counter()
+        self.last = None
+        self.iteration = 0
+        self._write("episodes.csv", [["phase", "iteration", "frames", "wall_s", "env",
+                                      "parts_delivered", "collisions", "mu", "team_reward"]], "w")
+        self._write("iterations.csv", [["iteration", "frames", "wall_s", "iteration_s",
+                                        "frames_per_s", "episodes", "parts_delivered",
+                                        "team_reward"]], "w")
+
+    def __getstate__(self):
+        # BenchMARL pickles its callbacks into config.pkl; the experiment (and its envs,
+        # Rust objects) stays out.
+        return {k: v for k, v in self.__dict__.items() if k != "experiment"}
+
+    def _write(self, name, rows, mode="a"):
+        with open(self.out / name, mode, newline="") as f:
+            csv.writer(f).writerows(rows)
+
+    def episodes(self, rows):
+        self._write("episodes.csv", rows)
+
+    def on_batch_collected(self, batch):
+        import tending.benchmarl as tb
+
+        now = time.perf_counter()
+        it, frames = self.iteration, self.experiment.total_frames
+        rows = tb.episode_rows(batch)
+        env_of = batch.get(("next", "done")).squeeze(-1).nonzero()[:, 0].tolist()
+        self.episodes([["train", it, frames, f"{now - self.start:.2f}", e, r["parts_delivered"],
+                        r["collisions"], f"{r['mu']:.4f}", f"{r['team_reward']:.3f}"]
+                       for e, r in zip(env_of, rows)])
+        # From the previous collection's end to this one's: training, evaluation, collection
+        # (the first: set-up and the first collection).
+        dt = now - (self.last if self.last is not None else self.start)
+        n = batch.numel()
+
+        def mean(k):
+            return sum(r[k] for r in rows) / len(rows) if rows else float("nan")
+
+        self._write("iterations.csv", [[it, frames, f"{now - self.start:.2f}", f"{dt:.2f}",
+                                        f"{n / dt:.1f}", len(rows),
+                                        f"{mean('parts_delivered'):.2f}",
+                                        f"{mean('team_reward'):.2f}"]])
+        print(f"iter {it}: {frames} frames, {now - self.start:.0f} s, {n / dt:.0f} frames/s, "
+              f"parts {mean('parts_delivered'):.1f}, team reward {mean('team_reward'):.1f}",
+              flush=True)
+        self.iteration += 1
+        self.last = now
+
+    def on_evaluation_end(self, rollouts):
+        now = time.perf_counter()
+        rows = list(_rollout_rows(rollouts))
+        self.episodes([["eval", self.iteration - 1, self.experiment.total_frames,
+                        f"{now - self.start:.2f}", e, *row] for e, row in enumerate(rows)])
+        parts = sum(r[0] for r in rows) / max(len(rows), 1)
+        print(f"  eval: parts {parts:.1f} per episode ({len(rows)} episodes)", flush=True)
+
+
+def _rollout_rows(rollouts):
+    """(parts_delivered, collisions, mu, team_reward) of each evaluation rollout (one env's
+    steps, ending where its episode ended)."""
+    for td in rollouts:
+        done = td.get(("next", "done")).reshape(-1)
+        if not done.any():
+            continue
+        last = int(done.nonzero()[0, 0])
+        info = td.get(("next", "agents", "info"))[last]
+        team = float(td.get(("next", "agents", "reward"))[: last + 1].sum())
+        yield (float(info["parts_delivered"][0, 0]), float(info["collisions"][0, 0]),
+               round(float(info["mu"][0, 0]), 4), round(team, 3))
+
+
+if __name__ == "__main__":
+    main()
