@@ -120,7 +120,8 @@ plot_bin() { # a tending that has `plot` (TENDING may be an older copy)
 table() { # name title csv-glob... [-- training log.csv... for the paper's last-100 protocol]
     local name="$1" title="$2"; shift 2
     local files=() logs=() extra=() f
-    while [ $# -gt 0 ] && [ "$1" != -- ]; do files+=("$1"); shift; done
+    # (a campaign in flight has no greedy results yet: only existing files are read)
+    while [ $# -gt 0 ] && [ "$1" != -- ]; do [ -f "$1" ] && files+=("$1"); shift; done
     [ $# -gt 0 ] && shift && logs=("$@")
     for f in greedy-orca matching-orca shipped; do
         [ -f "$RUNS/$name/$f/eval/results.csv" ] && extra+=("$RUNS/$name/$f/eval/results.csv")
