@@ -24,6 +24,7 @@ use pyo3::prelude::*;
 use pyo3::types::PyDict;
 use rayon::prelude::*;
 use sim::episode_seed;
+use sim::fork::{for_each_piece, Split};
 use sim::Env;
 
 /// `n_envs` environments of one setup stepped together on rayon, the GIL released. Each
@@ -42,38 +43,101 @@ pub struct VecSim {
     n_actions: usize,
 }
 
-/// `n` chunks of `w` values; empty slices when `w` is 0 (a group with no entities, e.g.
-/// the peers of a 1-robot setup), where `chunks_mut` would panic.
-fn chunks(buf: &mut [f32], w: usize, n: usize) -> Vec<&mut [f32]> {
-    if w == 0 {
-        (0..n).map(|_| -> &mut [f32] { &mut [] }).collect()
-    } else {
-        buf.chunks_mut(w).collect()
+/// A run of envs and their blocks of the step's outputs (env-major): the piece of a
+/// batched call one thread does (`sim::fork`: the calling thread does one itself).
+struct Lanes<'a> {
+    envs: &'a mut [Env],
+    /// Actions (steps only; empty for a plain observation).
+    actions: &'a [u8],
+    rewards: &'a mut [f32],
+    done: &'a mut [bool],
+    /// Values per env: actions/rewards, then the four observation groups.
+    w: [usize; 5],
+    obs: [&'a mut [f32]; 4],
+}
+
+impl Split for Lanes<'_> {
+    fn len(&self) -> usize {
+        self.envs.len()
+    }
+    fn split_at(self, mid: usize) -> (Self, Self) {
+        let w = self.w;
+        let (e0, e1) = self.envs.split_at_mut(mid);
+        let (a0, a1) = self.actions.split_at((w[0] * mid).min(self.actions.len()));
+        let (r0, r1) = self
+            .rewards
+            .split_at_mut((w[0] * mid).min(self.rewards.len()));
+        let (d0, d1) = self.done.split_at_mut(mid.min(self.done.len()));
+        let [o, m, s, p] = self.obs;
+        let ((o0, o1), (m0, m1)) = (cut(o, w[1], mid), cut(m, w[2], mid));
+        let ((s0, s1), (p0, p1)) = (cut(s, w[3], mid), cut(p, w[4], mid));
+        (
+            Lanes {
+                envs: e0,
+                actions: a0,
+                rewards: r0,
+                done: d0,
+                w,
+                obs: [o0, m0, s0, p0],
+            },
+            Lanes {
+                envs: e1,
+                actions: a1,
+                rewards: r1,
+                done: d1,
+                w,
+                obs: [o1, m1, s1, p1],
+            },
+        )
     }
 }
 
-/// Write every env's observation into the four flat buffers (env-major), in parallel.
-fn observe_all(envs: &[Env], n: usize, c: obs::Counts, bufs: [&mut [f32]; 4]) {
-    let [o, m, s, p] = bufs;
-    let w = [
+/// A buffer of `w` values per env cut at env `mid`.
+fn cut(b: &mut [f32], w: usize, mid: usize) -> (&mut [f32], &mut [f32]) {
+    b.split_at_mut((w * mid).min(b.len()))
+}
+
+/// `n` consecutive blocks of `w` values (empty ones when `w` is 0: a group with no
+/// entities, e.g. the peers of a 1-robot setup, where `chunks_mut` would panic).
+fn blocks(b: &mut [f32], w: usize, n: usize) -> impl Iterator<Item = &mut [f32]> {
+    let mut rest = b;
+    (0..n).map(move |_| {
+        let (head, tail) = std::mem::take(&mut rest).split_at_mut(w);
+        rest = tail;
+        head
+    })
+}
+
+impl Lanes<'_> {
+    /// Step each env (when there are actions) and write its observation: one pass per
+    /// env, its state still in cache.
+    fn run(self) -> Result<(), sim::SimError> {
+        let e_n = self.envs.len();
+        let [o, m, s, p] = self.obs;
+        let w = self.w;
+        let obs = blocks(o, w[1], e_n).zip(blocks(m, w[2], e_n));
+        let obs = obs.zip(blocks(s, w[3], e_n)).zip(blocks(p, w[4], e_n));
+        for (i, (env, (((o, m), s), p))) in self.envs.iter_mut().zip(obs).enumerate() {
+            if !self.actions.is_empty() {
+                env.step_actions(&self.actions[i * w[0]..(i + 1) * w[0]])?;
+                self.rewards[i * w[0]..(i + 1) * w[0]].copy_from_slice(env.rewards());
+                self.done[i] = env.is_done();
+            }
+            env.observe_into(o, m, s, p);
+        }
+        Ok(())
+    }
+}
+
+/// Values per env: robots, then each observation group.
+fn widths(n: usize, c: obs::Counts) -> [usize; 5] {
+    [
+        n,
         n * SELF_DIM,
         n * c.machines * MACHINE_DIM,
         n * c.storages * STORAGE_DIM,
         n * c.peers * PEER_DIM,
-    ];
-    let e_n = envs.len();
-    let (co, cm, cs, cp) = (
-        chunks(o, w[0], e_n),
-        chunks(m, w[1], e_n),
-        chunks(s, w[2], e_n),
-        chunks(p, w[3], e_n),
-    );
-    envs.par_iter()
-        .zip(co)
-        .zip(cm)
-        .zip(cs)
-        .zip(cp)
-        .for_each(|((((env, o), m), s), p)| env.observe_into(o, m, s, p));
+    ]
 }
 
 type VecStep<'py> = (
@@ -168,7 +232,7 @@ impl VecSim {
     }
 
     /// The current observations, each array shaped (n_envs, n_robots, ...).
-    fn observe<'py>(&self, py: Python<'py>) -> PyResult<ObsArrays<'py>> {
+    fn observe<'py>(&mut self, py: Python<'py>) -> PyResult<ObsArrays<'py>> {
         let arrs = obs_arrays(py, &[self.envs.len(), self.n], self.counts);
         {
             let (mut o, mut m, mut s, mut p) = (
@@ -177,14 +241,21 @@ impl VecSim {
                 arrs.2.readwrite(),
                 arrs.3.readwrite(),
             );
-            let bufs = [
-                o.as_slice_mut()?,
-                m.as_slice_mut()?,
-                s.as_slice_mut()?,
-                p.as_slice_mut()?,
-            ];
-            let (envs, n, c) = (&self.envs, self.n, self.counts);
-            py.allow_threads(|| observe_all(envs, n, c, bufs));
+            let lanes = Lanes {
+                envs: &mut self.envs,
+                actions: &[],
+                rewards: &mut [],
+                done: &mut [],
+                w: widths(self.n, self.counts),
+                obs: [
+                    o.as_slice_mut()?,
+                    m.as_slice_mut()?,
+                    s.as_slice_mut()?,
+                    p.as_slice_mut()?,
+                ],
+            };
+            py.allow_threads(|| for_each_piece(lanes, &Lanes::run))
+                .map_err(|e| sim_err("observe", e))?;
         }
         Ok(arrs)
     }
@@ -213,31 +284,21 @@ impl VecSim {
                 obs.2.readwrite(),
                 obs.3.readwrite(),
             );
-            let c = self.counts;
-            // Each env steps and writes its observation in one task: one rayon pass, its
-            // state still in cache.
-            let (co, cm, cs, cp) = (
-                chunks(o.as_slice_mut()?, n * SELF_DIM, e_n),
-                chunks(m.as_slice_mut()?, n * c.machines * MACHINE_DIM, e_n),
-                chunks(s.as_slice_mut()?, n * c.storages * STORAGE_DIM, e_n),
-                chunks(p.as_slice_mut()?, n * c.peers * PEER_DIM, e_n),
-            );
-            let envs = &mut self.envs;
-            py.allow_threads(|| {
-                envs.par_iter_mut()
-                    .zip(a.par_chunks(n))
-                    .zip(rs.par_chunks_mut(n))
-                    .zip(done.par_iter_mut())
-                    .zip(co.into_par_iter().zip(cm).zip(cs).zip(cp))
-                    .try_for_each(|((((env, a), r), d), (((o, m), s), p))| {
-                        env.step_actions(a)?;
-                        r.copy_from_slice(env.rewards());
-                        *d = env.is_done();
-                        env.observe_into(o, m, s, p);
-                        Ok::<(), sim::SimError>(())
-                    })
-            })
-            .map_err(|e| sim_err("actions", e))?;
+            let lanes = Lanes {
+                envs: &mut self.envs,
+                actions: &a,
+                rewards: rs,
+                done: &mut done,
+                w: widths(n, self.counts),
+                obs: [
+                    o.as_slice_mut()?,
+                    m.as_slice_mut()?,
+                    s.as_slice_mut()?,
+                    p.as_slice_mut()?,
+                ],
+            };
+            py.allow_threads(|| for_each_piece(lanes, &Lanes::run))
+                .map_err(|e| sim_err("actions", e))?;
         }
         let mut finals = None;
         let mut metrics: Vec<Option<Bound<'py, PyDict>>> = vec![None; e_n];

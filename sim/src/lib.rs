@@ -8,7 +8,8 @@
 //! - [`ScenarioConfig`]: every constant, from TOML.
 //! - [`Setup`]: `N.M_K` names.
 //! - [`Env`]: one environment: step, pick/place, rewards, metrics, live add/remove.
-//! - [`VecEnv`]: many environments on rayon, deterministic whatever the thread count.
+//! - [`VecEnv`]: many environments stepped together ([`fork`]: one run of envs per thread,
+//!   the caller included), deterministic whatever the thread count.
 //! - [`baselines`]: scripted random and greedy policies.
 //! - [`parts_bound`]: the most parts any controller can deliver from an episode's layout.
 
@@ -22,6 +23,7 @@ mod config;
 mod entities;
 mod env;
 mod error;
+pub mod fork;
 mod grid;
 pub mod layout;
 mod metrics;

@@ -1,12 +1,13 @@
-//! Many environments stepped together on rayon's pool.
+//! Many environments stepped together, one contiguous run of envs per thread
+//! ([`crate::fork`]: the calling thread steps one run itself).
 //!
 //! Each environment is stepped by one thread from start to end of its step, and its
 //! episode seeds derive from (base seed, env index, episode number) only, so results are
 //! bit-for-bit the same whatever the number of threads.
 
+use crate::fork::{cut, for_each_piece, Split};
 use crate::{Env, Metrics, ScenarioConfig, Setup, SimError};
 use obs::ObsBatch;
-use rayon::prelude::*;
 
 /// Seed of episode `episode` of environment `env` (splitmix64 mixing).
 pub fn episode_seed(base: u64, env: usize, episode: u64) -> u64 {
@@ -112,16 +113,26 @@ impl VecEnv {
             });
         }
         let base = self.base_seed;
-        self.envs
-            .par_iter_mut()
-            .zip(cmds.par_chunks(n))
-            .zip(self.rewards.par_chunks_mut(n))
-            .zip(self.contacts.par_chunks_mut(n))
-            .zip(self.done.par_iter_mut())
-            .zip(self.finished.par_iter_mut())
-            .zip(self.episode.par_iter_mut())
-            .enumerate()
-            .try_for_each(|(e, ((((((env, a), rew), con), done), fin), ep))| {
+        let lanes = StepLanes {
+            first: 0,
+            n,
+            envs: &mut self.envs,
+            cmds,
+            rewards: &mut self.rewards,
+            contacts: &mut self.contacts,
+            done: &mut self.done,
+            finished: &mut self.finished,
+            episode: &mut self.episode,
+        };
+        for_each_piece(lanes, &|l: StepLanes<C>| {
+            let it = l
+                .envs
+                .iter_mut()
+                .zip(l.cmds.chunks(n))
+                .zip(l.rewards.chunks_mut(n));
+            let it = it.zip(l.contacts.chunks_mut(n)).zip(l.done.iter_mut());
+            let it = it.zip(l.finished.iter_mut()).zip(l.episode.iter_mut());
+            for (i, ((((((env, a), rew), con), done), fin), ep)) in it.enumerate() {
                 step(env, a)?;
                 rew.copy_from_slice(env.rewards());
                 for (c, ev) in con.iter_mut().zip(env.events()) {
@@ -132,10 +143,11 @@ impl VecEnv {
                 if *done {
                     *fin = Some(*env.metrics());
                     *ep += 1;
-                    env.reset(episode_seed(base, e, *ep))?;
+                    env.reset(episode_seed(base, l.first + i, *ep))?;
                 }
-                Ok(())
-            })
+            }
+            Ok(())
+        })
     }
 
     /// Every robot's observation, env-major.
@@ -151,23 +163,125 @@ impl VecEnv {
             peers,
             ..
         } = out;
-        let e = self.envs.len();
-        self.envs
-            .par_iter()
-            .zip(chunks(own, n * obs::SELF_DIM, e))
-            .zip(chunks(machines, n * m * obs::MACHINE_DIM, e))
-            .zip(chunks(storages, n * k * obs::STORAGE_DIM, e))
-            .zip(chunks(peers, n * p * obs::PEER_DIM, e))
-            .for_each(|((((env, o), mc), sc), pc)| env.observe_into(o, mc, sc, pc));
+        let lanes = ObsLanes {
+            envs: &self.envs,
+            w: [
+                n * obs::SELF_DIM,
+                n * m * obs::MACHINE_DIM,
+                n * k * obs::STORAGE_DIM,
+                n * p * obs::PEER_DIM,
+            ],
+            bufs: [own, machines, storages, peers],
+        };
+        let _ = for_each_piece(lanes, &|l: ObsLanes| {
+            let e = l.envs.len();
+            let [o, mc, sc, pc] = l.bufs;
+            let it = blocks(o, l.w[0], e).zip(blocks(mc, l.w[1], e));
+            let it = it.zip(blocks(sc, l.w[2], e)).zip(blocks(pc, l.w[3], e));
+            for (env, (((o, mc), sc), pc)) in l.envs.iter().zip(it) {
+                env.observe_into(o, mc, sc, pc);
+            }
+            Ok::<(), ()>(())
+        });
     }
 }
 
-/// `n` chunks of `size`; empty slices when `size` is 0 (a group with no entities), where
-/// `par_chunks_mut` would yield no chunk at all and silently skip every env.
-fn chunks(s: &mut [f32], size: usize, n: usize) -> impl IndexedParallelIterator<Item = &mut [f32]> {
-    if size == 0 {
-        rayon::iter::Either::Left((0..n).into_par_iter().map(|_| -> &mut [f32] { &mut [] }))
-    } else {
-        rayon::iter::Either::Right(s.par_chunks_mut(size))
+/// `n` consecutive blocks of `w` values (empty blocks when `w` is 0: a group with no
+/// entities, where `chunks_mut` would panic).
+fn blocks(b: &mut [f32], w: usize, n: usize) -> impl Iterator<Item = &mut [f32]> {
+    let mut rest = b;
+    (0..n).map(move |_| {
+        let (head, tail) = std::mem::take(&mut rest).split_at_mut(w);
+        rest = tail;
+        head
+    })
+}
+
+/// A run of envs and their slices of the step's outputs (env-major).
+struct StepLanes<'a, C> {
+    /// Index of `envs[0]` in the whole batch (for episode seeds).
+    first: usize,
+    n: usize,
+    envs: &'a mut [Env],
+    cmds: &'a [C],
+    rewards: &'a mut [f32],
+    contacts: &'a mut [u32],
+    done: &'a mut [bool],
+    finished: &'a mut [Option<Metrics>],
+    episode: &'a mut [u64],
+}
+
+impl<C: Sync> Split for StepLanes<'_, C> {
+    fn len(&self) -> usize {
+        self.envs.len()
+    }
+    fn split_at(self, mid: usize) -> (Self, Self) {
+        let n = self.n;
+        let (e0, e1) = self.envs.split_at_mut(mid);
+        let (c0, c1) = self.cmds.split_at(n * mid);
+        let (r0, r1) = cut(self.rewards, n, mid);
+        let (k0, k1) = cut(self.contacts, n, mid);
+        let (d0, d1) = self.done.split_at_mut(mid);
+        let (f0, f1) = self.finished.split_at_mut(mid);
+        let (p0, p1) = self.episode.split_at_mut(mid);
+        let first = self.first;
+        (
+            StepLanes {
+                first,
+                n,
+                envs: e0,
+                cmds: c0,
+                rewards: r0,
+                contacts: k0,
+                done: d0,
+                finished: f0,
+                episode: p0,
+            },
+            StepLanes {
+                first: first + mid,
+                n,
+                envs: e1,
+                cmds: c1,
+                rewards: r1,
+                contacts: k1,
+                done: d1,
+                finished: f1,
+                episode: p1,
+            },
+        )
+    }
+}
+
+/// A run of envs and their blocks of the four observation buffers.
+struct ObsLanes<'a> {
+    envs: &'a [Env],
+    /// Values per env in each buffer.
+    w: [usize; 4],
+    bufs: [&'a mut [f32]; 4],
+}
+
+impl Split for ObsLanes<'_> {
+    fn len(&self) -> usize {
+        self.envs.len()
+    }
+    fn split_at(self, mid: usize) -> (Self, Self) {
+        let (e0, e1) = self.envs.split_at(mid);
+        let [a, b, c, d] = self.bufs;
+        let (a0, a1) = cut(a, self.w[0], mid);
+        let (b0, b1) = cut(b, self.w[1], mid);
+        let (c0, c1) = cut(c, self.w[2], mid);
+        let (d0, d1) = cut(d, self.w[3], mid);
+        (
+            ObsLanes {
+                envs: e0,
+                w: self.w,
+                bufs: [a0, b0, c0, d0],
+            },
+            ObsLanes {
+                envs: e1,
+                w: self.w,
+                bufs: [a1, b1, c1, d1],
+            },
+        )
     }
 }
