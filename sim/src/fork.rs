@@ -17,6 +17,9 @@
 pub trait Split: Sized + Send {
     /// Environments in this piece.
     fn len(&self) -> usize;
+    fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
     /// The first `mid` envs and the rest.
     fn split_at(self, mid: usize) -> (Self, Self);
 }
