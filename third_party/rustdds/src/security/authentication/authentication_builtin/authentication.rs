@@ -29,7 +29,7 @@ use crate::{
 };
 use super::{
   types::{
-    parse_signature_algo_name_to_ring, BuiltinAuthenticatedPeerCredentialToken,
+    parse_signature_algo_name_to_ring, without_nul, BuiltinAuthenticatedPeerCredentialToken,
     BuiltinIdentityToken, DH_MODP_KAGREE_ALGO_NAME, ECDH_KAGREE_ALGO_NAME,
     QOS_CRL_PROPERTY_NAME, QOS_CRL_PROPERTY_NAME_FASTDDS, QOS_IDENTITY_CA_PROPERTY_NAME,
     QOS_IDENTITY_CERTIFICATE_PROPERTY_NAME, QOS_PASSWORD_PROPERTY_NAME,
@@ -37,6 +37,13 @@ use super::{
   },
   BuiltinHandshakeState, DHKeys, LocalParticipantInfo, RemoteParticipantInfo,
 };
+
+/// The remote's signed permissions document (`c.perm`) as access control parses it:
+/// without the terminating NUL Cyclone DDS sends with it.
+fn permissions_document(c_perm: Bytes) -> Bytes {
+  let len = without_nul(&c_perm).len();
+  c_perm.slice(..len)
+}
 
 // GUID start from certificate subject name, as dictated in DDS Security spec
 // v1.1 Section "9.3.3 DDS:Auth:PKI-DH plugin behavior", Table 52
@@ -608,9 +615,10 @@ impl Authentication for AuthenticationBuiltin {
 
     // Check which key agreement algorithm the remote has chosen & generate our own
     // key pair
-    let dh2_keys = if request.c_kagree_algo == *DH_MODP_KAGREE_ALGO_NAME {
+    let requested_kagree_algo = without_nul(&request.c_kagree_algo);
+    let dh2_keys = if requested_kagree_algo == DH_MODP_KAGREE_ALGO_NAME.as_bytes() {
       DHKeys::new_modp_keys()?
-    } else if request.c_kagree_algo == *ECDH_KAGREE_ALGO_NAME {
+    } else if requested_kagree_algo == ECDH_KAGREE_ALGO_NAME.as_bytes() {
       DHKeys::new_ec_keys(&self.secure_random_generator)?
     } else {
       return Err(create_security_error_and_log!(
@@ -728,7 +736,7 @@ impl Authentication for AuthenticationBuiltin {
 
     // Store remote's ID certificate and permissions doc
     remote_info.identity_certificate_opt = Some(cert1);
-    remote_info.signed_permissions_xml_opt = Some(request.c_perm);
+    remote_info.signed_permissions_xml_opt = Some(permissions_document(request.c_perm));
 
     // Create a new handshake handle & map it to remotes identity handle
     let new_handshake_handle = self.get_new_handshake_handle();
@@ -845,6 +853,17 @@ impl Authentication for AuthenticationBuiltin {
           debug!("Cannot compare hashes in process_handshake. Reply did not have any.");
         }
 
+        // The reply may echo our DH1 (optional, Table 50); if it does, it must be ours.
+        // The signature is checked over our own DH1 either way.
+        let dh1_public_key = dh1.public_key_bytes()?;
+        if let Some(received_dh1) = &reply.dh1 {
+          if received_dh1.as_ref() != dh1_public_key.as_ref() {
+            return Err(create_security_error_and_log!(
+              "Diffie-Hellman parameter DH1 mismatch on authentication reply"
+            ));
+          }
+        }
+
         // Reconstruct signed data: C2 = Cert2, Perm2, Pdata2, Dsign_algo2, Kagree_algo2
         // Spec: "Sign(Hash(C2) | Challenge2 | DH2 | Challenge1 | DH1 | Hash(C1)) )",
         // see Table 50
@@ -866,7 +885,7 @@ impl Authentication for AuthenticationBuiltin {
             "challenge1",
             Bytes::copy_from_slice(reply.challenge1.as_ref()),
           ),
-          BinaryProperty::with_propagate("dh1", Bytes::copy_from_slice(reply.dh1.as_ref())),
+          BinaryProperty::with_propagate("dh1", Bytes::copy_from_slice(dh1_public_key.as_ref())),
           BinaryProperty::with_propagate("hash_c1", Bytes::copy_from_slice(hash_c1.as_ref())),
         ];
 
@@ -884,14 +903,12 @@ impl Authentication for AuthenticationBuiltin {
         // Verify that the key agreement algo in the reply is as we expect
         let kagree_algo_in_reply = reply.c_kagree_algo;
         let expected_kagree_algo = dh1.kagree_algo_name_str();
-        if kagree_algo_in_reply != expected_kagree_algo {
+        if without_nul(&kagree_algo_in_reply) != expected_kagree_algo.as_bytes() {
           return Err(create_security_error_and_log!(
             "Unexpected key agreement algorithm: {kagree_algo_in_reply:?} in \
              HandshakeReplyMessageToken. Expected {expected_kagree_algo}"
           ));
         }
-
-        let dh1_public_key = dh1.public_key_bytes()?;
 
         // Compute the shared secret
         let shared_secret = dh1.compute_shared_secret(reply.dh2.clone())?;
@@ -954,7 +971,7 @@ impl Authentication for AuthenticationBuiltin {
 
         // Store remote's ID certificate and permissions doc
         remote_info.identity_certificate_opt = Some(cert2);
-        remote_info.signed_permissions_xml_opt = Some(reply.c_perm);
+        remote_info.signed_permissions_xml_opt = Some(permissions_document(reply.c_perm));
 
         Ok((
           ValidationOutcome::OkFinalMessage,
@@ -996,16 +1013,19 @@ impl Authentication for AuthenticationBuiltin {
           }
         }
 
-        // sanity check
-        if dh1_public != final_token.dh1 {
+        // sanity checks: DH1 and DH2 are optional in the final message (Table 51;
+        // Cyclone DDS leaves them out), but if present they must be the ones we hold.
+        if final_token.dh1.as_ref().is_some_and(|d| *d != dh1_public) {
           return Err(create_security_error_and_log!(
             "Diffie-Hellman parameter DH1 mismatch on authentication final receive"
           ));
         }
-
-        // sanity check
         let dh2_public_key = dh2.public_key_bytes()?;
-        if dh2_public_key.as_ref() != final_token.dh2.as_ref() {
+        if final_token
+          .dh2
+          .as_ref()
+          .is_some_and(|d| d.as_ref() != dh2_public_key.as_ref())
+        {
           return Err(create_security_error_and_log!(
             "Diffie-Hellman parameter DH2 mismatch on authentication final receive"
           ));

@@ -309,12 +309,21 @@ pub const ECDH_KAGREE_ALGO_NAME: &str = "ECDH+prime256v1-CEUM";
 pub const RSA_SIGNATURE_ALGO_NAME: &[u8] = b"RSASSA-PSS-SHA256";
 pub const ECDSA_SIGNATURE_ALGO_NAME: &[u8] = b"ECDSA-SHA256";
 
+/// A string-valued binary property (an algorithm name, a permissions document)
+/// without the one terminating NUL some implementations send with it: Cyclone DDS
+/// writes `c.dsign_algo`, `c.kagree_algo` and `c.perm` as C strings including their
+/// '\0' and accepts both forms itself. Hashes and signatures are computed over the
+/// bytes as received; this is only for comparing and parsing them.
+pub(crate) fn without_nul(b: &[u8]) -> &[u8] {
+  b.strip_suffix(&[0]).unwrap_or(b)
+}
+
 // Recognize standard string constatns and convert to
 // corresponging algorithm identifiers in ring library.
 pub(crate) fn parse_signature_algo_name_to_ring(
   algo_name: &[u8],
 ) -> SecurityResult<&'static dyn ring::signature::VerificationAlgorithm> {
-  match algo_name {
+  match without_nul(algo_name) {
     RSA_SIGNATURE_ALGO_NAME => Ok(&ring::signature::RSA_PSS_2048_8192_SHA256),
     ECDSA_SIGNATURE_ALGO_NAME => Ok(&ring::signature::ECDSA_P256_SHA256_ASN1),
     _other =>
@@ -429,9 +438,9 @@ impl BuiltinHandshakeMessageToken {
       .challenge2
       .ok_or_else(|| create_security_error_and_log!("challenge2 not found"))
       .and_then(|b| Challenge::try_from(b.as_ref()))?;
-    let dh1 = self
-      .dh1
-      .ok_or_else(|| create_security_error_and_log!("dh1 not found"))?;
+    // Optional in the reply (DDS Security 1.1 Table 50): the requester knows its own
+    // DH1, so a replier may leave it out (Cyclone DDS does).
+    let dh1 = self.dh1;
     let dh2 = self
       .dh2
       .ok_or_else(|| create_security_error_and_log!("dh2 not found"))?;
@@ -474,12 +483,10 @@ impl BuiltinHandshakeMessageToken {
       .challenge2
       .ok_or_else(|| create_security_error_and_log!("challenge2 not found"))
       .and_then(|b| Challenge::try_from(b.as_ref()))?;
-    let dh1 = self
-      .dh1
-      .ok_or_else(|| create_security_error_and_log!("dh1 not found"))?;
-    let dh2 = self
-      .dh2
-      .ok_or_else(|| create_security_error_and_log!("dh2 not found"))?;
+    // Both optional in the final message (Table 51): the replier holds them already
+    // (Cyclone DDS leaves them out).
+    let dh1 = self.dh1;
+    let dh2 = self.dh2;
     let signature = self
       .signature
       .ok_or_else(|| create_security_error_and_log!("signature not found"))?;
@@ -521,7 +528,8 @@ pub(in crate::security) struct HandshakeReply {
   pub hash_c2: Option<Sha256>,
   pub challenge1: Challenge,
   pub challenge2: Challenge,
-  pub dh1: Bytes,
+  /// Optional: the requester's own DH1, echoed.
+  pub dh1: Option<Bytes>,
   pub dh2: Bytes,
   pub signature: Bytes,
 }
@@ -532,8 +540,10 @@ pub(in crate::security) struct HandshakeFinal {
   pub hash_c2: Option<Sha256>,
   pub challenge1: Challenge,
   pub challenge2: Challenge,
-  pub dh1: Bytes,
-  pub dh2: Bytes,
+  /// Optional: the requester's DH1, which the replier holds.
+  pub dh1: Option<Bytes>,
+  /// Optional: the replier's own DH2, echoed.
+  pub dh2: Option<Bytes>,
   pub signature: Bytes,
 }
 
@@ -692,5 +702,75 @@ impl From<BuiltinAuthenticatedPeerCredentialToken> for AuthenticatedPeerCredenti
           true,
         );
     AuthenticatedPeerCredentialToken::from(dh_builder.build())
+  }
+}
+
+#[cfg(test)]
+mod tests {
+  use super::*;
+
+  // Cyclone DDS sends c.dsign_algo, c.kagree_algo and c.perm as C strings with their
+  // terminating NUL.
+  #[test]
+  fn algorithm_names_are_read_with_or_without_one_terminating_nul() {
+    assert!(parse_signature_algo_name_to_ring(b"ECDSA-SHA256").is_ok());
+    assert!(parse_signature_algo_name_to_ring(b"ECDSA-SHA256\0").is_ok());
+    assert!(parse_signature_algo_name_to_ring(b"RSASSA-PSS-SHA256\0").is_ok());
+    assert!(parse_signature_algo_name_to_ring(b"ECDSA-SHA256\0\0").is_err());
+    assert!(parse_signature_algo_name_to_ring(b"ECDSA-SHA25\0").is_err());
+    assert_eq!(without_nul(b"ECDH+prime256v1-CEUM\0"), b"ECDH+prime256v1-CEUM");
+    assert_eq!(without_nul(b"x"), b"x");
+    assert_eq!(without_nul(b""), b"");
+  }
+
+  fn token(class_id: &[u8], with: &[&str]) -> BuiltinHandshakeMessageToken {
+    let b = |name: &str| with.contains(&name).then(|| Bytes::from_static(b"v"));
+    let challenge = |name: &str| with.contains(&name).then(|| Bytes::from(vec![1u8; 32]));
+    BuiltinHandshakeMessageToken {
+      class_id: Bytes::copy_from_slice(class_id),
+      c_id: b("c.id"),
+      c_perm: b("c.perm"),
+      c_pdata: b("c.pdata"),
+      c_dsign_algo: b("c.dsign_algo"),
+      c_kagree_algo: b("c.kagree_algo"),
+      ocsp_status: None,
+      hash_c1: None,
+      dh1: b("dh1"),
+      hash_c2: None,
+      dh2: b("dh2"),
+      challenge1: challenge("challenge1"),
+      challenge2: challenge("challenge2"),
+      signature: b("signature"),
+    }
+  }
+
+  // DDS Security 1.1 Tables 50 and 51: dh1 is optional in the reply, dh1 and dh2 in the
+  // final message (Cyclone DDS leaves them out); the rest is required.
+  #[test]
+  fn reply_and_final_messages_need_not_echo_the_dh_keys() {
+    let reply = [
+      "c.id",
+      "c.perm",
+      "c.pdata",
+      "c.dsign_algo",
+      "c.kagree_algo",
+      "dh2",
+      "challenge1",
+      "challenge2",
+      "signature",
+    ];
+    let r = token(HANDSHAKE_REPLY_CLASS_ID, &reply).extract_reply();
+    assert!(r.is_ok_and(|r| r.dh1.is_none()));
+    let without_dh2: Vec<&str> = reply.iter().copied().filter(|p| *p != "dh2").collect();
+    assert!(token(HANDSHAKE_REPLY_CLASS_ID, &without_dh2)
+      .extract_reply()
+      .is_err());
+
+    let fin = ["challenge1", "challenge2", "signature"];
+    let f = token(HANDSHAKE_FINAL_CLASS_ID, &fin).extract_final();
+    assert!(f.is_ok_and(|f| f.dh1.is_none() && f.dh2.is_none()));
+    assert!(token(HANDSHAKE_FINAL_CLASS_ID, &["challenge1", "challenge2"])
+      .extract_final()
+      .is_err());
   }
 }
