@@ -290,7 +290,24 @@ impl TryFrom<Vec<CryptoToken>> for KeyMaterial_AES_GCM_GMAC_seq {
 impl TryFrom<KeyMaterial_AES_GCM_GMAC_seq> for Vec<CryptoToken> {
   type Error = SecurityError;
   fn try_from(key_materials: KeyMaterial_AES_GCM_GMAC_seq) -> Result<Self, Self::Error> {
-    Vec::from(key_materials)
+    // Tokens are what is sent to the remote. Of two key materials, one of kind NONE
+    // (the payload part of an endpoint whose payload is not protected, e.g. the
+    // builtin secure discovery writers) is left out: Cyclone DDS refuses a token of
+    // kind NONE for an endpoint that is protected at all ("Invalid Crypto token",
+    // code 115, so it never decoded our secure discovery) and sends none itself. The
+    // receiver then uses the one key for both scopes, and a payload that is not
+    // protected is never decoded.
+    let mut key_materials = Vec::from(key_materials);
+    if key_materials.len() == 2
+      && key_materials.iter().any(|k| {
+        k.transformation_kind != BuiltinCryptoTransformationKind::CRYPTO_TRANSFORMATION_KIND_NONE
+      })
+    {
+      key_materials.retain(|k| {
+        k.transformation_kind != BuiltinCryptoTransformationKind::CRYPTO_TRANSFORMATION_KIND_NONE
+      });
+    }
+    key_materials
       .iter()
       .map(|key_material| CryptoToken::try_from(key_material.clone()))
       .collect()
@@ -381,4 +398,46 @@ impl From<KeyMaterial_AES_GCM_GMAC> for Serializable_KeyMaterial_AES_GCM_GMAC {
 pub(super) enum CommonEncodeKeyMaterials {
   Some(KeyMaterial_AES_GCM_GMAC_seq),
   Volatile(bool), // bool is for use_256_bit_key
+}
+
+#[cfg(test)]
+mod tests {
+  use super::*;
+
+  fn key_material(kind: BuiltinCryptoTransformationKind) -> KeyMaterial_AES_GCM_GMAC {
+    let key = || match kind {
+      BuiltinCryptoTransformationKind::CRYPTO_TRANSFORMATION_KIND_NONE => BuiltinKey::None,
+      _ => BuiltinKey::AES256([7; 32]),
+    };
+    KeyMaterial_AES_GCM_GMAC {
+      transformation_kind: kind,
+      master_salt: key(),
+      sender_key_id: CryptoTransformKeyId::ZERO,
+      master_sender_key: key(),
+      receiver_specific_key_id: CryptoTransformKeyId::ZERO,
+      master_receiver_specific_key: BuiltinKey::None,
+    }
+  }
+
+  fn kinds(tokens: Vec<CryptoToken>) -> Vec<BuiltinCryptoTransformationKind> {
+    tokens
+      .into_iter()
+      .map(|t| KeyMaterial_AES_GCM_GMAC::try_from(t).unwrap().transformation_kind)
+      .collect()
+  }
+
+  // Cyclone DDS refuses a token of kind NONE for a protected endpoint (code 115), e.g.
+  // the payload part of a secure discovery writer; it is not sent.
+  #[test]
+  fn a_key_material_of_kind_none_beside_a_real_one_is_not_sent_as_a_token() {
+    use BuiltinCryptoTransformationKind::*;
+    let gcm = CRYPTO_TRANSFORMATION_KIND_AES256_GCM;
+    let none = CRYPTO_TRANSFORMATION_KIND_NONE;
+    let two = KeyMaterial_AES_GCM_GMAC_seq::Two(key_material(gcm), key_material(none));
+    assert_eq!(kinds(Vec::<CryptoToken>::try_from(two).unwrap()), [gcm]);
+    let two = KeyMaterial_AES_GCM_GMAC_seq::Two(key_material(gcm), key_material(gcm));
+    assert_eq!(kinds(Vec::<CryptoToken>::try_from(two).unwrap()), [gcm, gcm]);
+    let one = KeyMaterial_AES_GCM_GMAC_seq::One(key_material(none));
+    assert_eq!(kinds(Vec::<CryptoToken>::try_from(one).unwrap()), [none]);
+  }
 }
