@@ -1624,7 +1624,10 @@ impl Discovery {
       {
         Ok(dr_iter) => {
           for msg in dr_iter {
-            security.volatile_message_secure_read(&msg);
+            security.volatile_message_secure_read(
+              &msg,
+              &self.dcps_participant_volatile_message_secure.writer,
+            );
           }
         }
         Err(e) => {

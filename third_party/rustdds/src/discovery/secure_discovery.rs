@@ -48,7 +48,7 @@ use crate::{
 use super::{
   discovery::{DataWriterPlCdr, NormalDiscoveryPermission},
   discovery_db::{discovery_db_read, discovery_db_write, DiscoveryDB},
-  spdp_participant_data, DiscoveredReaderData, DiscoveredTopicData, DiscoveredWriterData,
+  builtin_endpoint::BuiltinEndpointSet, spdp_participant_data, DiscoveredReaderData, DiscoveredTopicData, DiscoveredWriterData,
   ParticipantMessageData, Participant_GUID, SpdpDiscoveredParticipantData,
 };
 
@@ -111,7 +111,18 @@ pub(crate) struct SecureDiscovery {
 
   // A set for keeping track which remote readers are relay-only
   relay_only_remote_readers: HashSet<GUID>,
+
+  // Remotes whose participant crypto tokens we have received.
+  remotes_with_participant_tokens: HashSet<GuidPrefix>,
+  // Key exchanges (our participant and built-in endpoint tokens) held back for remotes
+  // we authenticated as the initiator, until the remote's participant tokens arrive
+  // (or DEFERRED_KEY_EXCHANGE_TIMEOUT passes): when and with which built-in endpoints.
+  deferred_key_exchanges: HashMap<GuidPrefix, (std::time::Instant, BuiltinEndpointSet)>,
 }
+
+/// How long the initiator of a handshake holds its key exchange back waiting for the
+/// replier's participant crypto tokens (see `start_key_exchange_with_remote_participant`).
+const DEFERRED_KEY_EXCHANGE_TIMEOUT: std::time::Duration = std::time::Duration::from_secs(2);
 
 impl SecureDiscovery {
   pub fn new(
@@ -257,6 +268,8 @@ impl SecureDiscovery {
       cached_received_key_exchange_messages: HashMap::new(),
       user_data_endpoints_with_keys_already_sent_to: HashSet::new(),
       relay_only_remote_readers: HashSet::new(),
+      remotes_with_participant_tokens: HashSet::new(),
+      deferred_key_exchanges: HashMap::new(),
     })
   }
 
@@ -1576,12 +1589,29 @@ impl SecureDiscovery {
       }
     }
     self.cached_key_exchange_messages_for_resend = msgs_still_to_cache;
+
+    // Key exchanges held back for a replier that has not sent its tokens in time
+    let overdue: Vec<(GuidPrefix, BuiltinEndpointSet)> = self
+      .deferred_key_exchanges
+      .iter()
+      .filter(|(_, (since, _))| since.elapsed() >= DEFERRED_KEY_EXCHANGE_TIMEOUT)
+      .map(|(remote, (_, endpoints))| (*remote, *endpoints))
+      .collect();
+    for (remote, endpoints) in overdue {
+      self.deferred_key_exchanges.remove(&remote);
+      debug!("No participant crypto tokens from {remote:?} in time; sending ours anyway.");
+      self.send_participant_key_exchange(remote, endpoints, key_exchange_writer);
+    }
   }
 
   /// A remote participant is gone (lease expired or disposed): forget its handshake, so
   /// the stored message kept for re-arming is dropped and nothing more is sent to it.
   pub fn forget_remote_participant(&mut self, remote_guid_prefix: &GuidPrefix) {
     self.handshake_states.remove(remote_guid_prefix);
+    self
+      .remotes_with_participant_tokens
+      .remove(remote_guid_prefix);
+    self.deferred_key_exchanges.remove(remote_guid_prefix);
     self
       .stored_authentication_messages
       .remove(remote_guid_prefix);
@@ -1939,7 +1969,11 @@ impl SecureDiscovery {
     }
   }
 
-  pub fn volatile_message_secure_read(&mut self, msg: &ParticipantVolatileMessageSecure) {
+  pub fn volatile_message_secure_read(
+    &mut self,
+    msg: &ParticipantVolatileMessageSecure,
+    key_exchange_writer: &no_key::DataWriter<ParticipantVolatileMessageSecure>,
+  ) {
     // Check is the message meant to us (see 7.4.4.4 Destination of the
     // ParticipantVolatileMessageSecure of the spec)
     let dest_guid = msg.generic.destination_participant_guid;
@@ -1972,11 +2006,11 @@ impl SecureDiscovery {
         }
 
         let remote_participant_guidp = msg.generic.message_identity.writer_guid.prefix;
-        if let Err(e) = self
+        let set_result = self
           .security_plugins
           .get_plugins()
-          .set_remote_participant_crypto_tokens(remote_participant_guidp, crypto_tokens)
-        {
+          .set_remote_participant_crypto_tokens(remote_participant_guidp, crypto_tokens); // Release lock
+        if let Err(e) = set_result {
           create_security_error_and_log!(
             "Failed to set remote participant crypto tokens: {}. Remote: {:?}",
             e,
@@ -1984,6 +2018,23 @@ impl SecureDiscovery {
           );
         } else {
           info!("Set crypto tokens for remote participant {remote_participant_guidp:?}");
+          self
+            .remotes_with_participant_tokens
+            .insert(remote_participant_guidp);
+          // The replier is ready for our tokens now: send them if we held them back.
+          if let Some((_, builtin_endpoints)) = self
+            .deferred_key_exchanges
+            .remove(&remote_participant_guidp)
+          {
+            debug!(
+              "Got the participant crypto tokens of {remote_participant_guidp:?}; sending ours."
+            );
+            self.send_participant_key_exchange(
+              remote_participant_guidp,
+              builtin_endpoints,
+              key_exchange_writer,
+            );
+          }
         }
       }
 
@@ -2189,6 +2240,45 @@ impl SecureDiscovery {
         }
       };
 
+    // As the initiator of the handshake (we sent the final message) we hold our
+    // tokens back until the replier's participant tokens arrive, as Cyclone DDS does:
+    // the replier may not have processed our final message yet, and a replier that
+    // matches our volatile writer only then treats what we wrote before as history a
+    // volatile reader never receives (Cyclone DDS does exactly that), so our keys would
+    // never reach it and it could decode nothing of ours. The replier sends its tokens
+    // once it has our final message, which proves it is ready. If they do not come
+    // within DEFERRED_KEY_EXCHANGE_TIMEOUT we send anyway.
+    if self.get_handshake_state(&remote_guid_prefix)
+      == Some(DiscHandshakeState::CompletedWithFinalMessageSent)
+      && !self
+        .remotes_with_participant_tokens
+        .contains(&remote_guid_prefix)
+    {
+      debug!(
+        "Holding our crypto tokens for {remote_guid_prefix:?} back until its participant tokens \
+         arrive."
+      );
+      self.deferred_key_exchanges.insert(
+        remote_guid_prefix,
+        (std::time::Instant::now(), remotes_builtin_endpoints),
+      );
+      return;
+    }
+    self.send_participant_key_exchange(
+      remote_guid_prefix,
+      remotes_builtin_endpoints,
+      key_exchange_writer,
+    );
+  }
+
+  /// Send our participant crypto tokens and our secure built-in endpoints' tokens to
+  /// `remote_guid_prefix`, whose built-in endpoints are `remotes_builtin_endpoints`.
+  fn send_participant_key_exchange(
+    &mut self,
+    remote_guid_prefix: GuidPrefix,
+    remotes_builtin_endpoints: BuiltinEndpointSet,
+    key_exchange_writer: &no_key::DataWriter<ParticipantVolatileMessageSecure>,
+  ) {
     // Send local participant crypto tokens to remote
     // TODO: do this only if needed?
     let crypto_tokens_res = self
