@@ -9,7 +9,9 @@ export CARGO_TERM_COLOR=never
 section() { echo "== [$(date -u +%H:%M:%S), ${SECONDS}s] $*"; }
 
 # System tools the fault tests use (network namespaces, packet loss): Debian packages,
-# installed here so a fresh machine needs nothing by hand.
+# installed here so a fresh machine needs nothing by hand. (Cyclone DDS, for the secure
+# interop tests in ros/tests/cyclone.rs, is installed by tests/cyclone/build.sh when the
+# test first needs it.)
 if ! command -v iptables >/dev/null || ! command -v ip >/dev/null; then
     if [ "$(id -u)" = 0 ] && command -v apt-get >/dev/null; then
         section "apt-get install iptables iproute2 (fault tests)"
@@ -68,7 +70,9 @@ cargo test --workspace --release --locked -j 2 2>&1
 # Vendored rustdds (third_party/, ADR 0005): the start-up deadlock regression tests, the
 # DATA_FRAG tests (an encrypted fragment run must survive deserialization) and the
 # crypto-handle test (a re-created writer must register), the reader-cache tests (built-in
-# readers must not lose unread discovery or key-exchange samples), with the security feature the
+# readers must not lose unread discovery or key-exchange samples), the Cyclone DDS interop
+# fixes (handshake tokens without the optional DH keys, NUL-terminated algorithm names, no
+# crypto token of kind NONE; issue 38), with the security feature the
 # fleet builds it with. Run from a copy outside the workspace: cargo refuses a nested
 # package that is not a member. Built in the dev profile without debuginfo: these are logic
 # regression tests (they pass in 2 s either way), and an unoptimised build of rustdds and
@@ -83,7 +87,9 @@ CARGO_TARGET_DIR="$PWD/target/third_party" cargo test --locked -j 2 --config 'pr
     messages::submessages::data_frag::tests \
     security::cryptographic::cryptographic_builtin::crypto_key_factory::tests \
     structure::dds_cache::tests \
-    discovery::discovery::tests::sedp_topic_caches_get_sedp_reader_limits 2>&1
+    discovery::discovery::tests::sedp_topic_caches_get_sedp_reader_limits \
+    security::authentication::authentication_builtin::types::tests \
+    security::cryptographic::cryptographic_builtin::key_material::tests 2>&1
 rm -rf "$rdds"
 
 # Python: rclpy (real ROS 2 Jazzy, Fast DDS, from PyPI wheels) against the release binaries:
