@@ -8,7 +8,8 @@
 //! - with robot_0's enclave, Cyclone creates its participant (it used to refuse our
 //!   governance: "Can not parse governance file (code: 137)"), authenticates with the
 //!   bridge's enclave (our log says so), reads the poses the bridge publishes on
-//!   `rt/robot_0/pose`, and its `rt/robot_0/cmd_vel` reaches the bridge;
+//!   `rt/robot_0/pose` (every other one with a 3000-character frame_id, which RustDDS
+//!   sends in encrypted fragments), and its `rt/robot_0/cmd_vel` reaches the bridge;
 //! - a Cyclone participant without security reads nothing and commands nobody, while it
 //!   reads an unsecured participant's topic on the same domain (the control);
 //! - a Cyclone participant with robot_0's enclave from another keystore (another CA) is
@@ -164,6 +165,8 @@ struct PeerResult {
     read: u64,
     /// Samples of the control topic (`--read2`).
     read2: u64,
+    /// Poses read with a frame_id of 1024 characters or more.
+    big: u64,
     wrote: u64,
     last_x: f64,
     matched_pub: u64,
@@ -195,6 +198,7 @@ impl PeerResult {
                 "refused" => r.refused = Some(v.to_string()),
                 "read" => r.read = v.parse().unwrap(),
                 "read2" => r.read2 = v.parse().unwrap(),
+                "big" => r.big = v.parse().unwrap(),
                 "wrote" => r.wrote = v.parse().unwrap(),
                 "last_x" => r.last_x = v.parse().unwrap(),
                 "matched_pub" => r.matched_pub = v.parse().unwrap(),
@@ -280,7 +284,8 @@ struct BridgeSide {
 }
 
 /// The bridge's side while a Cyclone peer runs: publish robot_0's pose (x = 1.5) every
-/// 50 ms and take robot_0's commands, until the peer reports; `also` runs every tick
+/// 50 ms, every other one with a 3000-character frame_id (a sample sent in fragments),
+/// and take robot_0's commands, until the peer reports; `also` runs every tick
 /// (controls).
 fn bridge_with_peer(
     bridge: &mut Node,
@@ -292,8 +297,10 @@ fn bridge_with_peer(
     let cmd_sub = subscription::<Twist>(bridge, "/robot_0/cmd_vel", Profile::RobotStream).unwrap();
     let mut cmds = Vec::new();
     let t0 = Instant::now();
-    loop {
-        let _ = pose_pub.publish(pose(1.5));
+    let mut big = pose(1.5);
+    big.header.frame_id = "f".repeat(3000);
+    for tick in 0.. {
+        let _ = pose_pub.publish(if tick % 2 == 1 { big.clone() } else { pose(1.5) });
         also();
         std::thread::sleep(Duration::from_millis(50));
         while let Ok(Some((m, _))) = cmd_sub.take() {
@@ -301,10 +308,11 @@ fn bridge_with_peer(
         }
         if let Ok(r) = peer.try_recv() {
             eprintln!(
-                "cyclone {}: read {} poses (last x {}), {} of the control, wrote {}; the bridge \
-                 got {} commands",
+                "cyclone {}: read {} poses ({} fragmented, last x {}), {} of the control, wrote \
+                 {}; the bridge got {} commands",
                 r.guid,
                 r.read,
+                r.big,
                 r.last_x,
                 r.read2,
                 r.wrote,
@@ -317,6 +325,7 @@ fn bridge_with_peer(
             "the Cyclone peer did not finish"
         );
     }
+    unreachable!()
 }
 
 #[test]
@@ -336,6 +345,7 @@ fn a_cyclone_peer_with_a_robot_enclave_reads_the_pose_and_commands_the_robot() {
     let (r, b) = bridge_with_peer(&mut bridge, peer, || ());
     assert!(r.refused.is_none(), "Cyclone refused our enclave:\n{}", r.log);
     assert!(r.read >= 20, "Cyclone read {} poses:\n{}", r.read, r.log);
+    assert!(r.big >= 5, "Cyclone read {} fragmented poses:\n{}", r.big, r.log);
     assert_eq!(r.last_x, 1.5, "Cyclone read a wrong pose");
     assert!(
         b.cmds.len() >= 10,

@@ -386,3 +386,20 @@ fn a_revoked_identity_is_refused_at_start_and_by_its_peers() {
     assert_eq!(commanded, 0, "a revoked identity commanded robot_1");
     std::fs::remove_dir_all(root).unwrap();
 }
+
+/// Keystores cover domains 0..=230 (Cyclone DDS refuses to parse a governance or
+/// permissions document naming a higher one); a secure participant on 231 or 232, which
+/// ROS allows, is refused at start with the reason instead of failing inside DDS.
+#[test]
+fn a_secure_participant_above_domain_230_is_refused_with_the_reason() {
+    let (root, ks) = keystore("domain");
+    let sec = enclave(&ks, "/tending/robot_0");
+    for d in [231, 232] {
+        let msg = match context_with(d, &sec) {
+            Ok(_) => panic!("a secure participant started on domain {d}"),
+            Err(e) => format!("{e:#}"),
+        };
+        assert!(msg.contains(&format!("domain {d} is above 230")), "{msg}");
+    }
+    std::fs::remove_dir_all(root).unwrap();
+}

@@ -12,7 +12,9 @@
  * It prints "guid=<its GUID prefix, 24 hex digits>" first, reads
  * geometry_msgs/PoseStamped samples from --read (and --read2, counted apart: a control),
  * publishes a geometry_msgs/Twist every 50 ms on --write, and prints one line per second
- * and a last line "result read=N read2=N2 wrote=M last_x=X matched_pub=P matched_sub=Q".
+ * and a last line "result read=N read2=N2 big=B wrote=M last_x=X matched_pub=P
+ * matched_sub=Q" (B: poses read whose header.frame_id has 1024 characters or more, i.e.
+ * samples the writer had to send in fragments).
  * It stops after --seconds, or once it has read --until samples and seen its writer
  * matched for a second. Exit 0; 2 when the participant (or an entity) cannot be
  * created, with Cyclone's reason on stderr.
@@ -148,7 +150,7 @@ int main(int argc, char **argv)
   printf("participant up (%s)\n", enclave ? enclave : "no security");
   fflush(stdout);
 
-  long nread = 0, nread2 = 0, nwrote = 0;
+  long nread = 0, nread2 = 0, nbig = 0, nwrote = 0;
   double last_x = 0.0;
   uint32_t matched_pub = 0, matched_sub = 0;
   int matched_ticks = 0;
@@ -174,8 +176,11 @@ int main(int argc, char **argv)
       for (int i = 0; i < n; i++)
         if (infos[i].valid_data)
         {
+          const geometry_msgs_msg_dds__PoseStamped_ *p = samples[i];
           nread++;
-          last_x = ((geometry_msgs_msg_dds__PoseStamped_ *)samples[i])->pose.position.x;
+          last_x = p->pose.position.x;
+          if (p->header.frame_id && strlen(p->header.frame_id) >= 1024)
+            nbig++;
         }
       if (n > 0)
         dds_return_loan(rd, samples, n);
@@ -204,8 +209,8 @@ int main(int argc, char **argv)
       break;
     dds_sleepfor(DDS_MSECS(50));
   }
-  printf("result read=%ld read2=%ld wrote=%ld last_x=%g matched_pub=%u matched_sub=%u\n", nread,
-         nread2, nwrote, last_x, matched_pub, matched_sub);
+  printf("result read=%ld read2=%ld big=%ld wrote=%ld last_x=%g matched_pub=%u matched_sub=%u\n",
+         nread, nread2, nbig, nwrote, last_x, matched_pub, matched_sub);
   fflush(stdout);
   dds_delete(pp);
   return 0;
