@@ -497,6 +497,7 @@ impl MessageBuilder {
         .data_value
         .bytes_slice(from_byte, up_to_before_byte),
     );
+    let plain_len = serialized_payload.len();
 
     #[cfg(not(feature = "security"))]
     let encoded_payload = serialized_payload;
@@ -528,6 +529,19 @@ impl MessageBuilder {
         }
       }
     }; // end security encoding
+
+    // DDSI-RTPS 2.5 9.4.1: every submessage starts on a 32-bit boundary, and Cyclone
+    // DDS refuses a submessage whose length is not a multiple of 4 as malformed (its
+    // receiver dropped every handshake message of ours whose size was not, e.g. 4762
+    // bytes, so those participants never authenticated). The fragment size is a
+    // multiple of 4, so only the final run of a sample can end unaligned: pad it with
+    // zeros. Receivers take sampleSize bytes of the fragments (ours:
+    // FragmentAssembler::insert_frags clamps to the sample), so the padding is not data.
+    // An encoded (protected) run is left as the crypto plugin made it.
+    let mut encoded_payload = encoded_payload;
+    if encoded_payload.len() == plain_len && !encoded_payload.len().is_multiple_of(4) {
+      encoded_payload.resize(encoded_payload.len().next_multiple_of(4), 0);
+    }
 
     let data_message = DataFrag {
       reader_id: reader_entity_id,
@@ -699,6 +713,57 @@ mod tests {
   use log::info;
 
   use super::*;
+  use crate::{
+    messages::submessages::elements::serialized_payload::SerializedPayload,
+    structure::guid::EntityKind, RepresentationIdentifier,
+  };
+
+  // The final run of a fragmented sample whose size is not a multiple of 4 (a 4762-byte
+  // handshake message: Cyclone DDS refused it as malformed) is padded to 4 bytes; the
+  // runs before it are whole fragments and unchanged, and the padding is zeros.
+  #[test]
+  fn the_final_data_frag_of_an_unaligned_sample_is_padded_to_4_bytes() {
+    let sample: Vec<u8> = (0..4758u32).map(|i| (i % 251) as u8).collect();
+    let payload = SerializedPayload::new(RepresentationIdentifier::CDR_LE, sample);
+    let change = CacheChange::new(
+      GUID::dummy_test_guid(EntityKind::WRITER_NO_KEY_BUILT_IN),
+      SequenceNumber::from(1),
+      Default::default(),
+      DDSData::new(payload),
+    );
+    let size = change.data_value.payload_size() as u32;
+    assert_eq!(size, 4762);
+    let frag = |start: u32, count: u16| {
+      let m = MessageBuilder::new().data_frag_msg(
+        &change,
+        EntityId::UNKNOWN,
+        change.writer_guid,
+        FragmentNumber::new(start),
+        count,
+        256,
+        size,
+        Endianness::LittleEndian,
+        None,
+      );
+      let sm = m.submessages.into_iter().next().unwrap();
+      match sm.body {
+        SubmessageBody::Writer(WriterSubmessage::DataFrag(d, _)) => (sm.header.content_length, d),
+        other => panic!("{other:?}"),
+      }
+    };
+    let (len, first) = frag(1, 4);
+    assert_eq!(len % 4, 0);
+    assert_eq!(first.serialized_payload.len(), 1024);
+    let (len, last) = frag(16, 4);
+    assert_eq!(len % 4, 0, "final DATA_FRAG length {len}");
+    // 3 whole fragments and 154 bytes of the fourth, then 2 bytes of padding
+    assert_eq!(last.serialized_payload.len(), 3 * 256 + 156);
+    assert_eq!(
+      last.serialized_payload[..922],
+      change.data_value.bytes_slice(3840, 4762)[..]
+    );
+    assert_eq!(last.serialized_payload[922..], [0, 0]);
+  }
 
   #[test]
 
