@@ -213,9 +213,11 @@ impl PeerResult {
 /// How the Cyclone peer runs.
 struct PeerRun<'a> {
     domain: u16,
+    /// The robot whose pose it reads and whose `cmd_vel` it writes (`robot_0`).
+    robot: &'a str,
     /// The enclave directory it is configured from; `None`: no security.
     enclave: Option<&'a Path>,
-    /// Its `cmd_vel` (linear x), on robot_0.
+    /// Its `cmd_vel` (linear x).
     vx: f64,
     /// At most this long; stop earlier after `until` poses (with its writer matched).
     secs: f64,
@@ -224,12 +226,13 @@ struct PeerRun<'a> {
     read2: Option<&'a str>,
 }
 
-/// Start the Cyclone peer reading robot_0's pose and commanding robot_0; its result
-/// arrives on the returned channel.
+/// Start the Cyclone peer reading a robot's pose and commanding it; its result arrives
+/// on the returned channel.
 fn spawn_peer(run: PeerRun) -> mpsc::Receiver<PeerResult> {
     let mut cmd = Command::new(cyclone_peer());
+    let (pose, cmd_vel) = (format!("rt/{}/pose", run.robot), format!("rt/{}/cmd_vel", run.robot));
     cmd.args(["--domain", &run.domain.to_string()])
-        .args(["--read", "rt/robot_0/pose", "--write", "rt/robot_0/cmd_vel"])
+        .args(["--read", &pose, "--write", &cmd_vel])
         .args(["--vx", &run.vx.to_string(), "--seconds", &run.secs.to_string()]);
     if let Some(n) = run.until {
         cmd.args(["--until", &n.to_string()]);
@@ -277,24 +280,27 @@ fn spawn_peer(run: PeerRun) -> mpsc::Receiver<PeerResult> {
     rx
 }
 
-/// What the bridge received from robot_0's `cmd_vel` while the peer ran.
+/// What the bridge received from the robot's `cmd_vel` while the peer ran.
 struct BridgeSide {
     /// Linear x of every command.
     cmds: Vec<f64>,
 }
 
-/// The bridge's side while a Cyclone peer runs: publish robot_0's pose (x = 1.5) every
+/// The bridge's side while a Cyclone peer runs: publish `robot`'s pose (x = 1.5) every
 /// 50 ms, every other one with a 3000-character frame_id (a sample sent in fragments),
-/// and take robot_0's commands, until the peer reports; `also` runs every tick
+/// and take `robot`'s commands, until the peer reports; `also` runs every tick
 /// (controls).
 fn bridge_with_peer(
     bridge: &mut Node,
+    robot: &str,
     peer: mpsc::Receiver<PeerResult>,
     mut also: impl FnMut(),
 ) -> (PeerResult, BridgeSide) {
     let pose_pub =
-        publisher::<PoseStamped>(bridge, "/robot_0/pose", Profile::RobotStream).unwrap();
-    let cmd_sub = subscription::<Twist>(bridge, "/robot_0/cmd_vel", Profile::RobotStream).unwrap();
+        publisher::<PoseStamped>(bridge, &format!("/{robot}/pose"), Profile::RobotStream)
+            .unwrap();
+    let cmd_sub =
+        subscription::<Twist>(bridge, &format!("/{robot}/cmd_vel"), Profile::RobotStream).unwrap();
     let mut cmds = Vec::new();
     let t0 = Instant::now();
     let mut big = pose(1.5);
@@ -328,21 +334,21 @@ fn bridge_with_peer(
     unreachable!()
 }
 
-#[test]
-fn a_cyclone_peer_with_a_robot_enclave_reads_the_pose_and_commands_the_robot() {
-    let (root, ks) = keystore("peer");
-    let d = domain(0);
+/// Cyclone with `robot`'s enclave reads the bridge's poses of `robot` and commands it.
+fn cyclone_robot_talks_to_the_bridge(name: &str, d: u16, robot: &str) {
+    let (root, ks) = keystore(name);
     let (_bc, mut bridge) = participant(d, &enclave(&ks, keystore::BRIDGE_ENCLAVE), "sim_bridge");
-    let dir = ks.enclave_dir("/tending/robot_0");
+    let dir = ks.enclave_dir(&keystore::robot_enclave(robot));
     let peer = spawn_peer(PeerRun {
         domain: d,
+        robot,
         enclave: Some(&dir),
         vx: 0.25,
         secs: 40.0,
         until: Some(20),
         read2: None,
     });
-    let (r, b) = bridge_with_peer(&mut bridge, peer, || ());
+    let (r, b) = bridge_with_peer(&mut bridge, robot, peer, || ());
     assert!(r.refused.is_none(), "Cyclone refused our enclave:\n{}", r.log);
     assert!(r.read >= 20, "Cyclone read {} poses:\n{}", r.read, r.log);
     assert!(r.big >= 5, "Cyclone read {} fragmented poses:\n{}", r.big, r.log);
@@ -358,6 +364,23 @@ fn a_cyclone_peer_with_a_robot_enclave_reads_the_pose_and_commands_the_robot() {
     let ok = our_log(&r.guid, "Authenticated successfully");
     assert!(!ok.is_empty(), "no authentication of {} in our log", r.guid);
     std::fs::remove_dir_all(root).unwrap();
+}
+
+/// robot_0's GUID (from its certificate's subject) is above the bridge's, so the bridge
+/// sends the handshake request and Cyclone replies.
+#[test]
+fn a_cyclone_peer_with_a_robot_enclave_reads_the_pose_and_commands_the_robot() {
+    cyclone_robot_talks_to_the_bridge("peer", domain(0), "robot_0");
+}
+
+/// robot_1's GUID is below the bridge's: Cyclone sends the request and the bridge
+/// replies with its certificate and permissions, a ~4.7 kB sample sent in fragments
+/// whose size ends on the ECDSA signature's 70-72 bytes. Before rustdds patch 0019 the
+/// final fragment was not padded to 4 bytes, Cyclone refused it as malformed in most
+/// runs, and the two never authenticated.
+#[test]
+fn a_cyclone_peer_that_sends_the_handshake_request_authenticates_too() {
+    cyclone_robot_talks_to_the_bridge("request", domain(3), "robot_1");
 }
 
 /// A Cyclone participant without security, beside the secure bridge and robot_0, and
@@ -378,13 +401,14 @@ fn an_unauthenticated_cyclone_participant_reads_nothing_and_commands_nobody() {
     let mut robot_got = 0;
     let peer = spawn_peer(PeerRun {
         domain: d,
+        robot: "robot_0",
         enclave: None,
         vx: -9.0,
         secs: 10.0,
         until: None,
         read2: Some("rt/robot_9/pose"),
     });
-    let (r, b) = bridge_with_peer(&mut bridge, peer, || {
+    let (r, b) = bridge_with_peer(&mut bridge, "robot_0", peer, || {
         let _ = open_pub.publish(pose(9.0));
         let _ = robot_cmd.publish(Twist::planar(0.1, 0.0));
         while let Ok(Some(_)) = robot_pose.take() {
@@ -430,13 +454,14 @@ fn a_cyclone_peer_with_another_cas_certificate_is_refused_both_ways() {
     let dir = other.enclave_dir("/tending/robot_0");
     let peer = spawn_peer(PeerRun {
         domain: d,
+        robot: "robot_0",
         enclave: Some(&dir),
         vx: -9.0,
         secs: 10.0,
         until: None,
         read2: None,
     });
-    let (r, b) = bridge_with_peer(&mut bridge, peer, || {
+    let (r, b) = bridge_with_peer(&mut bridge, "robot_0", peer, || {
         let _ = robot_cmd.publish(Twist::planar(0.1, 0.0));
         while let Ok(Some(_)) = robot_pose.take() {
             robot_got += 1;
