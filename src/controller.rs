@@ -1,27 +1,26 @@
-//! The controller `tending sim` and `tending eval` run: a scripted baseline by name, or a
-//! checkpoint with its safety-filter flags, and the label their tables show it under.
+//! The controller `tending sim` and `tending eval` run: a scripted method by name, or a
+//! checkpoint with its safety-layer flags, and the label their tables show it under.
 
 use anyhow::{bail, Context, Result};
+use plan::{Deployment, FilterMargins, Safety};
 use policy::train::Controller;
 use policy::Policy;
 use std::path::Path;
+
+/// The scripted methods `--policy` names.
+pub const SCRIPTS: &str = "greedy, greedy-orca, matching-orca or random";
 
 /// How a checkpoint runs: the flags both commands take.
 pub struct CheckpointFlags {
     /// Sample actions instead of taking the most probable one.
     pub sample: bool,
-    /// Behind the one-step action shield (obs::shield).
+    /// Behind the one-step action shield (plan::shield).
     pub shield: bool,
-    /// Through ORCA as a safety filter (obs::orca).
-    pub orca_filter: bool,
-    /// Without the ORCA filter even when the checkpoint was trained behind it.
-    pub no_orca_filter: bool,
-    /// Peer clearance of the ORCA filter at full speed, m.
-    pub clearance: f32,
-    /// Peer clearance of the ORCA filter at rest, m (at most `clearance`).
-    pub rest_clearance: f32,
-    /// The ORCA filter's horizon for boxes and walls, s.
-    pub obstacle_horizon: f32,
+    /// Through ORCA as a safety filter (plan::orca): `--orca-filter` Some(true),
+    /// `--no-orca-filter` Some(false), neither None (as the checkpoint was trained).
+    pub orca_filter: Option<bool>,
+    /// The ORCA filter's margins.
+    pub margins: FilterMargins,
 }
 
 /// A clearance in whole millimetres, for method names.
@@ -29,46 +28,58 @@ pub fn mm(m: f32) -> i32 {
     (m * 1000.0).round() as i32
 }
 
-/// The scripted baseline `name` names: greedy | greedy-orca | random.
-pub fn scripted(name: &str) -> Result<Controller> {
+/// Margins of the ORCA filter other than the deployed ones, as a method's name shows them
+/// (sweeps): " obstacles 0.3 s", " 25/40 mm" (rest/full speed), or both in that order;
+/// empty when deployed.
+fn margin_label(m: &FilterMargins) -> String {
+    let mut s = String::new();
+    if m.obstacle_horizon != FilterMargins::DEPLOYED.obstacle_horizon {
+        s = format!(" obstacles {} s", m.obstacle_horizon);
+    }
+    if !m.deployed_clearances() {
+        let rest = m.rest_clearance.min(m.clearance);
+        s += &format!(" {}/{} mm", mm(rest), mm(m.clearance));
+    }
+    s
+}
+
+/// The scripted method `name` names (greedy | greedy-orca | matching-orca | random), and
+/// its label. matching-ORCA runs behind the ORCA filter with `margins` (named in the label
+/// when they are not the deployed ones); the others ignore them.
+pub fn scripted(name: &str, margins: FilterMargins) -> Result<(Controller, String)> {
     Ok(match name {
-        "greedy" => Controller::Greedy,
-        "greedy-orca" => Controller::greedy_orca(),
-        "random" => Controller::Random,
-        o => bail!("unknown --policy `{o}`: expected greedy, greedy-orca or random"),
+        "greedy" => (Controller::Greedy, name.into()),
+        "greedy-orca" => (Controller::greedy_orca(), name.into()),
+        "matching-orca" => (
+            Controller::MatchingOrca { margins },
+            format!("{name}{}", margin_label(&margins)),
+        ),
+        "random" => (Controller::Random, name.into()),
+        o => bail!("unknown --policy `{o}`: expected {SCRIPTS}"),
     })
 }
 
-/// The checkpoint at `path` as a controller, and its label: `smappo+orca (file)`. A
-/// checkpoint trained behind the ORCA filter runs behind it (as it was trained and as
-/// robot_node runs it) unless the shield or `no_orca_filter` says otherwise; a
-/// target-action policy says so in its label (its rows must not read as the paper's
-/// policy).
+/// The checkpoint at `path` as a controller, and its label: `smappo+orca (file)`. Its
+/// safety layer follows [`Safety::choose`] offline: a checkpoint trained behind the ORCA
+/// filter runs behind it (as it was trained and as robot_node runs it) unless the shield
+/// or `--no-orca-filter` says otherwise; a target-action policy says so in its label (its
+/// rows must not read as the paper's policy).
 pub fn checkpoint(path: &Path, f: &CheckpointFlags) -> Result<(Controller, String)> {
     let pol = Policy::load(path).with_context(|| format!("--checkpoint {}", path.display()))?;
-    let orca_filter =
-        f.orca_filter || (pol.trained_with_orca_filter() && !f.shield && !f.no_orca_filter);
+    let deployment = Deployment::Offline {
+        trained_with_filter: pol.trained_with_orca_filter(),
+    };
+    let safety = Safety::choose(f.shield, f.orca_filter, deployment, f.margins);
     let targets = pol.actor().arch.actions == policy::ActionSpace::Targets;
     // Margins other than the deployed ones are part of the method's name (sweeps).
-    let rest = f.rest_clearance.min(f.clearance);
-    let mut margin = if orca_filter
-        && (f.clearance != obs::orca::FILTER_CLEARANCE
-            || rest != obs::orca::FILTER_REST_CLEARANCE.min(f.clearance))
-    {
-        format!(" {}/{} mm", mm(rest), mm(f.clearance))
-    } else {
-        String::new()
-    };
-    if orca_filter && f.obstacle_horizon != obs::orca::FILTER_OBSTACLE_HORIZON {
-        margin = format!(" obstacles {} s{margin}", f.obstacle_horizon);
-    }
+    let margin = safety.filter.map_or(String::new(), |m| margin_label(&m));
     let label = format!(
         "{}{}{}{margin} ({})",
         pol.kind(),
         if targets { " targets" } else { "" },
-        if f.shield {
+        if safety.shield {
             "+shield"
-        } else if orca_filter {
+        } else if safety.filter.is_some() {
             "+orca"
         } else {
             ""
@@ -77,20 +88,27 @@ pub fn checkpoint(path: &Path, f: &CheckpointFlags) -> Result<(Controller, Strin
             .and_then(|n| n.to_str())
             .unwrap_or("checkpoint")
     );
-    let actor = Box::new(pol.actor().clone());
-    let sample = f.sample;
-    let ctrl = if f.shield {
-        Controller::Shielded { actor, sample }
-    } else if orca_filter {
-        Controller::Filtered {
-            actor,
-            sample,
-            clearance: f.clearance,
-            rest_clearance: f.rest_clearance,
-            obstacle_horizon: f.obstacle_horizon,
-        }
-    } else {
-        Controller::Learned { actor, sample }
+    let ctrl = Controller::Learned {
+        actor: Box::new(pol.actor().clone()),
+        sample: f.sample,
+        safety,
     };
     Ok((ctrl, label))
+}
+
+/// How a controller picks its actions, for the results' header.
+pub fn mode(ctrl: &Controller) -> &'static str {
+    match ctrl {
+        Controller::Learned { sample, safety, .. } => {
+            match (*sample, safety.shield, safety.filter.is_some()) {
+                (true, true, _) => "sampled shielded actions",
+                (false, true, _) => "argmax shielded actions",
+                (true, false, true) => "sampled actions through the ORCA filter",
+                (false, false, true) => "argmax actions through the ORCA filter",
+                (true, false, false) => "sampled actions",
+                (false, false, false) => "argmax actions",
+            }
+        }
+        _ => "scripted",
+    }
 }

@@ -16,7 +16,8 @@ pub struct EvalArgs {
     /// Policy checkpoint (.safetensors) to evaluate.
     #[arg(long, conflicts_with = "policy")]
     pub checkpoint: Option<PathBuf>,
-    /// Scripted baseline instead of a checkpoint: greedy | greedy-orca | random.
+    /// Scripted method instead of a checkpoint: greedy | greedy-orca | matching-orca |
+    /// random (matching-ORCA behind the ORCA filter, with the --filter-* margins).
     #[arg(long)]
     pub policy: Option<String>,
     #[command(flatten)]
@@ -24,12 +25,12 @@ pub struct EvalArgs {
     /// Sample actions from the policy instead of taking the most probable one.
     #[arg(long)]
     pub sample: bool,
-    /// Put the checkpoint's actions behind the one-step action shield (obs::shield):
+    /// Put the checkpoint's actions behind the one-step action shield (plan::shield):
     /// actions whose next position would touch an observed body are masked.
     #[arg(long, requires = "checkpoint")]
     pub shield: bool,
     /// Pass the checkpoint's actions, as velocities, through ORCA as a safety filter
-    /// (obs::orca): continuous velocity commands.
+    /// (plan::orca): continuous velocity commands.
     #[arg(long, requires = "checkpoint", conflicts_with = "shield")]
     pub orca_filter: bool,
     /// Run a checkpoint trained behind the ORCA filter without it (by default such a
@@ -38,22 +39,22 @@ pub struct EvalArgs {
     #[arg(long, requires = "checkpoint", conflicts_with = "orca_filter")]
     pub no_orca_filter: bool,
     /// Peer clearance of the ORCA filter at full speed, m; at rest the smaller of this and
-    /// --filter-rest-clearance (docs/adr/0019). greedy-orca keeps its own fixed 0.025
-    /// (--script-clearance).
-    #[arg(long, default_value_t = obs::orca::FILTER_CLEARANCE)]
+    /// --filter-rest-clearance (docs/adr/0019); for a checkpoint behind the filter and for
+    /// matching-orca. greedy-orca keeps its own fixed 0.025 (--script-clearance).
+    #[arg(long, default_value_t = plan::orca::FILTER_CLEARANCE)]
     pub filter_clearance: f32,
     /// Peer clearance of the ORCA filter at rest, m (at most --filter-clearance). With
     /// --filter-clearance, a point of the safety margin's sweep (docs/RESULTS.md 7.7).
-    #[arg(long, default_value_t = obs::orca::FILTER_REST_CLEARANCE)]
+    #[arg(long, default_value_t = plan::orca::FILTER_REST_CLEARANCE)]
     pub filter_rest_clearance: f32,
     /// The ORCA filter's horizon for boxes and walls, s (docs/adr/0030).
-    #[arg(long, default_value_t = obs::orca::FILTER_OBSTACLE_HORIZON)]
+    #[arg(long, default_value_t = plan::orca::FILTER_OBSTACLE_HORIZON)]
     pub filter_obstacle_horizon: f32,
     /// greedy-ORCA's own peer clearance, m (with --policy greedy-orca).
-    #[arg(long, default_value_t = obs::orca::GREEDY_ORCA_CLEARANCE)]
+    #[arg(long, default_value_t = plan::orca::GREEDY_ORCA_CLEARANCE)]
     pub script_clearance: f32,
     /// greedy-ORCA's horizon for boxes and walls, s (with --policy greedy-orca).
-    #[arg(long, default_value_t = obs::orca::OBSTACLE_HORIZON)]
+    #[arg(long, default_value_t = plan::orca::OBSTACLE_HORIZON)]
     pub script_obstacle_horizon: f32,
     /// Scenario config (TOML); default: the simulator's defaults.
     #[arg(long)]
@@ -103,10 +104,10 @@ impl Runs {
 /// "greedy-orca obstacles 0.15 s", or both.
 fn script_label(clearance: f32, obstacle_horizon: f32) -> String {
     let mut s = String::from("greedy-orca");
-    if obstacle_horizon != obs::orca::OBSTACLE_HORIZON {
+    if obstacle_horizon != plan::orca::OBSTACLE_HORIZON {
         s += &format!(" obstacles {obstacle_horizon} s");
     }
-    if clearance != obs::orca::GREEDY_ORCA_CLEARANCE {
+    if clearance != plan::orca::GREEDY_ORCA_CLEARANCE {
         s += &format!(" {} mm", crate::controller::mm(clearance));
     }
     s
@@ -130,47 +131,44 @@ pub fn run(a: EvalArgs) -> Result<()> {
             bail!("{name} {v}: must be a positive number of seconds");
         }
     }
-    let script_default = a.script_clearance == obs::orca::GREEDY_ORCA_CLEARANCE
-        && a.script_obstacle_horizon == obs::orca::OBSTACLE_HORIZON;
+    let script_default = a.script_clearance == plan::orca::GREEDY_ORCA_CLEARANCE
+        && a.script_obstacle_horizon == plan::orca::OBSTACLE_HORIZON;
     if !script_default && a.policy.as_deref() != Some("greedy-orca") {
         bail!(
             "--script-clearance and --script-obstacle-horizon are greedy-ORCA's: pass them \
              with --policy greedy-orca"
         );
     }
+    let margins = plan::FilterMargins {
+        clearance: a.filter_clearance,
+        rest_clearance: a.filter_rest_clearance,
+        obstacle_horizon: a.filter_obstacle_horizon,
+    };
     let (ctrl, label) = match (&a.checkpoint, a.policy.as_deref()) {
         (Some(p), None) => {
             let flags = CheckpointFlags {
                 sample: a.sample,
                 shield: a.shield,
-                orca_filter: a.orca_filter,
-                no_orca_filter: a.no_orca_filter,
-                clearance: a.filter_clearance,
-                rest_clearance: a.filter_rest_clearance,
-                obstacle_horizon: a.filter_obstacle_horizon,
+                orca_filter: (a.orca_filter || a.no_orca_filter).then_some(a.orca_filter),
+                margins,
             };
             crate::controller::checkpoint(p, &flags)?
         }
         (None, Some("greedy-orca")) if !script_default => (
-            policy::train::Controller::GreedyOrca {
+            Controller::GreedyOrca {
                 clearance: a.script_clearance,
                 obstacle_horizon: a.script_obstacle_horizon,
             },
             script_label(a.script_clearance, a.script_obstacle_horizon),
         ),
-        (None, Some(name)) => (crate::controller::scripted(name)?, name.to_string()),
-        (None, None) => bail!("pass --checkpoint <file> or --policy greedy|greedy-orca|random"),
+        (None, Some(name)) => crate::controller::scripted(name, margins)?,
+        (None, None) => bail!(
+            "pass --checkpoint <file> or --policy {}",
+            crate::controller::SCRIPTS
+        ),
         (Some(_), Some(_)) => bail!("--checkpoint and --policy are exclusive"),
     };
-    let mode = match (&ctrl, a.sample) {
-        (Controller::Learned { .. }, true) => "sampled actions",
-        (Controller::Learned { .. }, false) => "argmax actions",
-        (Controller::Shielded { .. }, true) => "sampled shielded actions",
-        (Controller::Shielded { .. }, false) => "argmax shielded actions",
-        (Controller::Filtered { .. }, true) => "sampled actions through the ORCA filter",
-        (Controller::Filtered { .. }, false) => "argmax actions through the ORCA filter",
-        _ => "scripted",
-    };
+    let mode = crate::controller::mode(&ctrl);
     let cfg = crate::sim_cmd::load_config(&a.scenario)?;
     let (setups, seeds) = a.runs.parse()?;
     let episodes = a.runs.episodes;
@@ -357,6 +355,39 @@ mod tests {
             .unwrap_err()
             .to_string()
             .contains("--script-obstacle-horizon"));
+        std::fs::remove_dir_all(&dir).ok();
+    }
+
+    /// matching-ORCA is a scripted method: named "matching-orca", behind the ORCA filter
+    /// whose margins, when not the deployed ones, are part of its name as a checkpoint's.
+    #[test]
+    fn matching_orca_is_a_script_named_with_its_margins() {
+        let dir = std::env::temp_dir().join(format!("tending-eval-mo-{}", std::process::id()));
+        let out = dir.to_str().unwrap();
+        let first_row = || {
+            let csv = std::fs::read_to_string(dir.join("results.csv")).unwrap();
+            csv.lines().nth(1).unwrap().to_string()
+        };
+        let script = ["--policy", "matching-orca", "--out", out];
+        run(args(&script)).unwrap();
+        assert!(first_row().starts_with("matching-orca,2.2_2,0,1,"));
+        let swept = [
+            "--filter-obstacle-horizon",
+            "0.3",
+            "--filter-clearance",
+            "0.035",
+        ];
+        run(args(&[&script[..], &swept[..]].concat())).unwrap();
+        assert!(first_row().starts_with("matching-orca obstacles 0.3 s 30/35 mm,2.2_2,"));
+        let e = run(args(&[
+            "--policy",
+            "matching-orca",
+            "--script-clearance",
+            "0.03",
+        ]));
+        assert!(e.unwrap_err().to_string().contains("--script-clearance"));
+        let e = run(args(&["--policy", "matched"])).unwrap_err().to_string();
+        assert!(e.contains("matching-orca"), "{e}");
         std::fs::remove_dir_all(&dir).ok();
     }
 }

@@ -71,7 +71,8 @@ pub(crate) fn read(files: &[PathBuf]) -> Result<(Vec<String>, Points)> {
 
 /// The names to show for methods (the `policy` column of results.csv): without the
 /// checkpoint file in parentheses, unless two methods differ only in it (the bundled
-/// policy and matching-ORCA's always-"matched" checkpoint are both `smappo targets+orca`).
+/// policy and the always-"matched" checkpoint that stood for matching-ORCA before
+/// `--policy matching-orca` are both `smappo targets+orca`).
 pub(crate) fn short_names(methods: &[String]) -> Vec<String> {
     let short = |m: &str| m.split(" (").next().unwrap_or(m).to_string();
     methods

@@ -18,7 +18,7 @@ pub struct SimArgs {
     /// Setup N.M_K (robots.machines_storages), e.g. 14.10_4.
     #[arg(long, default_value = "6.4_2")]
     pub setup: String,
-    /// Scripted baseline: greedy | greedy-orca | random.
+    /// Scripted method: greedy | greedy-orca | matching-orca | random.
     #[arg(long, default_value = "greedy", conflicts_with = "checkpoint")]
     pub policy: String,
     /// A policy checkpoint (.safetensors) instead of a scripted baseline, run as
@@ -29,10 +29,10 @@ pub struct SimArgs {
     /// Sample the checkpoint's actions instead of taking the most probable one.
     #[arg(long, requires = "checkpoint")]
     pub sample: bool,
-    /// Put the checkpoint's actions behind the one-step action shield (obs::shield).
+    /// Put the checkpoint's actions behind the one-step action shield (plan::shield).
     #[arg(long, requires = "checkpoint")]
     pub shield: bool,
-    /// Pass the checkpoint's actions through ORCA as a safety filter (obs::orca).
+    /// Pass the checkpoint's actions through ORCA as a safety filter (plan::orca).
     #[arg(long, requires = "checkpoint", conflicts_with = "shield")]
     pub orca_filter: bool,
     #[arg(long, default_value_t = 20)]
@@ -57,17 +57,15 @@ pub fn load_config(path: &Option<PathBuf>) -> Result<ScenarioConfig> {
 
 /// The controller the arguments name, and its label for the table.
 fn controller(a: &SimArgs) -> Result<(Controller, String)> {
+    let margins = plan::FilterMargins::DEPLOYED;
     let Some(path) = &a.checkpoint else {
-        return Ok((crate::controller::scripted(&a.policy)?, a.policy.clone()));
+        return crate::controller::scripted(&a.policy, margins);
     };
     let flags = CheckpointFlags {
         sample: a.sample,
         shield: a.shield,
-        orca_filter: a.orca_filter,
-        no_orca_filter: false,
-        clearance: obs::orca::FILTER_CLEARANCE,
-        rest_clearance: obs::orca::FILTER_REST_CLEARANCE,
-        obstacle_horizon: obs::orca::FILTER_OBSTACLE_HORIZON,
+        orca_filter: a.orca_filter.then_some(true),
+        margins,
     };
     crate::controller::checkpoint(path, &flags)
 }
@@ -158,11 +156,12 @@ mod tests {
             (vec!["--policy", "greedy"], Controller::Greedy),
             (vec!["--policy", "greedy-orca"], Controller::greedy_orca()),
             (
+                vec!["--policy", "matching-orca"],
+                Controller::matching_orca(),
+            ),
+            (
                 vec!["--checkpoint", &moves],
-                Controller::Learned {
-                    actor: actor(&moves),
-                    sample: false,
-                },
+                Controller::learned(actor(&moves), false),
             ),
             // trained behind the ORCA filter: run behind it, as eval and robot_node do
             (

@@ -12,17 +12,11 @@
 //! Flags are 0.0 or 1.0. A batch holds many rows (robots, possibly from many environments)
 //! that share the same entity counts, stored row-major and contiguous so networks can run
 //! one GEMM per group.
+//!
+//! What a robot does with its observation (the scripted controllers, the target menu, the
+//! ORCA filter, the shield) is the planner's, in the `plan` crate above this one.
 
-pub mod action;
-pub mod detour;
 mod flat;
-pub mod geom;
-pub mod greedy;
-pub mod machine_clock;
-pub mod orca;
-pub mod shield;
-pub mod storage_queue;
-pub mod targets;
 
 pub use flat::{FlatLayout, FLAT_PAD};
 

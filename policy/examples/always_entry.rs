@@ -1,11 +1,14 @@
-//! A target-action "policy" that always asks for one menu entry (`obs::targets`), written
+//! A target-action "policy" that always asks for one menu entry (`plan::targets`), written
 //! as a checkpoint so `tending eval`, `tending fleet` and robot_node run it like any other:
 //! entry 1 is greedy-ORCA with the policy's planner, entry 7 ("matched") the matching-ORCA
 //! script of docs/RESULTS.md 7.8. The scripts a learned menu policy must beat are these.
+//! matching-ORCA itself is a scripted method now (`plan::MatchingOrca`: `tending eval
+//! --policy matching-orca`, robot_node `-p controller:=matching-orca`), step for step the
+//! checkpoint this writes for entry 7 (`policy/pretrained/matching_orca.safetensors`).
 //!
 //! cargo run --release -p policy --example always_entry -- ENTRY OUT.safetensors
 
-use obs::targets::{TargetAction, N_TARGET_ACTIONS};
+use plan::targets::{TargetAction, N_TARGET_ACTIONS};
 use policy::{checkpoint::save_policy, ActionSpace, Actor, ArchConfig};
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {

@@ -5,7 +5,7 @@
 //!
 //! cargo run --release -p policy --example bias_entry -- CHECKPOINT ENTRY DELTA OUT.safetensors
 
-use obs::targets::TargetAction;
+use plan::targets::TargetAction;
 use policy::{checkpoint::save_policy, ActionSpace, Policy};
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {

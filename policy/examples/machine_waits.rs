@@ -11,7 +11,7 @@
 //! - `none-free`: every robot carries a part.
 //!
 //! Also: parts picked but still carried at the end (`stranded`), and for `en-route` steps
-//! whether the matching (`obs::targets::matched_machine`, timed by the simulator's own
+//! whether the matching (`plan::matching::matched_machine`, timed by the simulator's own
 //! timers, which the planner's clock equals offline) sends a part-less robot to j, and
 //! how many steps away that robot is (docs/RESULTS.md 7.13).
 //!
@@ -85,7 +85,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                 let machines: Vec<_> = env.machines().collect();
                 let robots: Vec<_> = env.robots().collect();
                 let step = cfg.task.k_speed * cfg.world.dt;
-                let params = sim::baselines::greedy_params(sizes, &cfg);
+                let params = sim::baselines::fleet_params(sizes, &cfg).greedy_params();
                 env.observe(&mut batch);
                 let ready_in: Vec<Option<u32>> = machines
                     .iter()
@@ -93,7 +93,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                     .collect();
                 let matched: Vec<Option<usize>> = (0..robots.len())
                     .map(|i| {
-                        obs::targets::matched_machine(
+                        plan::matching::matched_machine(
                             batch.own_row(i),
                             batch.machines_row(i),
                             batch.peers_row(i),
@@ -122,7 +122,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                             .filter(|&(k, _)| k != i)
                             .map(|(k, q)| {
                                 (
-                                    obs::geom::norm([q.pos[0] - r.pos[0], q.pos[1] - r.pos[1]]),
+                                    plan::geom::norm([q.pos[0] - r.pos[0], q.pos[1] - r.pos[1]]),
                                     k,
                                 )
                             })
@@ -138,7 +138,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                         let boxes: Vec<String> = machines
                             .iter()
                             .enumerate()
-                            .map(|(j, m)| (j, obs::geom::box_distance(m.centre, m.half, r.pos)))
+                            .map(|(j, m)| (j, plan::geom::box_distance(m.centre, m.half, r.pos)))
                             .filter(|(_, d)| *d < 0.3)
                             .map(|(j, d)| {
                                 format!(
@@ -171,23 +171,23 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                             let acts = last_actions.borrow();
                             let a = acts
                                 .get(i)
-                                .filter(|&&a| a != obs::targets::TargetAction::Matched as u8)
-                                .and_then(|&a| obs::targets::TargetAction::from_index(a))
+                                .filter(|&&a| a != plan::targets::TargetAction::Matched as u8)
+                                .and_then(|&a| plan::targets::TargetAction::from_index(a))
                                 .map_or("", |a| a.name());
                             let still = last_pos.get(i).is_some_and(|q| {
-                                obs::geom::norm([q[0] - robots[i].pos[0], q[1] - robots[i].pos[1]])
+                                plan::geom::norm([q[0] - robots[i].pos[0], q[1] - robots[i].pos[1]])
                                     < 0.1 * step
                             });
                             format!(
                                 "r{i}@{:.0}{}{a}",
-                                obs::geom::box_distance(m.centre, m.half, robots[i].pos) / step,
+                                plan::geom::box_distance(m.centre, m.half, robots[i].pos) / step,
                                 if still { "s" } else { "" }
                             )
                         });
                         history[j].push(format!("{}{r}", if m.part_ready { "R:" } else { "" }));
                     }
                     let in_reach = robots.iter().any(|r| {
-                        !r.has_part && obs::geom::box_distance(m.centre, m.half, r.pos) <= near
+                        !r.has_part && plan::geom::box_distance(m.centre, m.half, r.pos) <= near
                     });
                     if m.part_ready && !in_reach {
                         c.2 = true;
@@ -235,7 +235,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                             .filter_map(|r| {
                                 machines.iter().find(|k| {
                                     !k.part_ready
-                                        && obs::geom::box_distance(k.centre, k.half, r.pos) <= near
+                                        && plan::geom::box_distance(k.centre, k.half, r.pos) <= near
                                 })
                             })
                             .map(|k| k.timer)
@@ -250,7 +250,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                     }
                     if let Some(i) = to_j.filter(|_| class == 2) {
                         heading += 1;
-                        heading_steps += (obs::geom::box_distance(m.centre, m.half, robots[i].pos)
+                        heading_steps += (plan::geom::box_distance(m.centre, m.half, robots[i].pos)
                             / step) as f64;
                     }
                 }
@@ -262,15 +262,15 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                     let busy = r.has_part || matched[i].is_some();
                     let away = machines
                         .iter()
-                        .map(|m| obs::geom::box_distance(m.centre, m.half, r.pos))
+                        .map(|m| plan::geom::box_distance(m.centre, m.half, r.pos))
                         .chain(
                             storages
                                 .iter()
-                                .map(|s| obs::geom::box_distance(s.centre, s.half, r.pos)),
+                                .map(|s| plan::geom::box_distance(s.centre, s.half, r.pos)),
                         )
                         .all(|d| d > near);
                     let slow = last_pos.get(i).is_some_and(|q| {
-                        obs::geom::norm([q[0] - r.pos[0], q[1] - r.pos[1]]) < step / 3.0
+                        plan::geom::norm([q[0] - r.pos[0], q[1] - r.pos[1]]) < step / 3.0
                     });
                     if busy && away {
                         moving_steps += 1;

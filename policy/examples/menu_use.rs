@@ -1,26 +1,26 @@
-//! Which target-menu entries (`obs::targets`) a target-action policy picks, by setup and by
+//! Which target-menu entries (`plan::targets`) a target-action policy picks, by setup and by
 //! whether the robot carries a part: argmax, through the ORCA planner and filter, by
 //! `tending eval`'s own episode runner. Used to see where a policy spends its robots
 //! (docs/RESULTS.md 7.4-7.5).
 //!
 //! cargo run --release -p policy --features train --example menu_use -- CHECKPOINT SETUP [EPISODES]
 
-use obs::targets::{TargetAction, N_TARGET_ACTIONS};
+use plan::targets::{TargetAction, N_TARGET_ACTIONS};
 use policy::train::eval::{run_episode_hooked, Controller};
 use sim::{ScenarioConfig, Setup};
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let args: Vec<String> = std::env::args().skip(1).collect();
     let (Some(ck), Some(setup)) = (args.first(), args.get(1)) else {
-        return Err("usage: menu_use CHECKPOINT|greedy-orca SETUP [EPISODES]".into());
+        return Err("usage: menu_use CHECKPOINT|greedy-orca|matching-orca SETUP [EPISODES]".into());
     };
     let setup: Setup = setup.parse().map_err(|e| format!("SETUP {setup}: {e}"))?;
     let episodes: u64 = args.get(2).map_or(Ok(10), |s| s.parse())?;
     // "greedy-orca" instead of a checkpoint: the script, for its share of robots carrying
     // (every robot-step counts as the "greedy" entry).
     let ctrl = Controller::script_or_filtered_checkpoint(ck)?;
-    if let Controller::Filtered { actor, .. } = &ctrl {
-        if !obs::targets::menu_size_ok(actor.arch.n_actions) {
+    if let Controller::Learned { actor, .. } = &ctrl {
+        if !plan::targets::menu_size_ok(actor.arch.n_actions) {
             return Err(format!("{ck}: not a target-action policy").into());
         }
     }

@@ -3,7 +3,7 @@
 //! behind other robots). Counts episodes with a spell of at least `MIN_STEPS` steps within
 //! `RADIUS_M` of one spot, and the carrier-steps past `MIN_STEPS` of those spells farther
 //! than `AWAY_RADII` robot radii from every storage box (queues at a storage excluded).
-//! Used for the planner's detour (obs::detour, docs/RESULTS.md 7.10).
+//! Used for the planner's detour (plan::detour, docs/RESULTS.md 7.10).
 //!
 //! cargo run --release -p policy --features train --example stuck_carriers -- CHECKPOINT|greedy-orca SETUPS [EPISODES] [SEED]
 //! (`STUCK_VERBOSE=1`: print each stop's episode, robot, first step and position)
@@ -58,7 +58,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                         longest = longest.max(n + 1);
                         let to_storage = storages
                             .iter()
-                            .map(|&(c, h)| obs::geom::box_distance(c, h, r.pos))
+                            .map(|&(c, h)| plan::geom::box_distance(c, h, r.pos))
                             .fold(f32::INFINITY, f32::min);
                         if n + 1 >= MIN_STEPS && to_storage > AWAY_RADII * radius {
                             stuck_steps += 1;

@@ -214,7 +214,7 @@ impl Actor {
     /// a fresh Adam: both outputs get equal logits, so the argmax (which keeps the lower
     /// index on ties) acts as before, sampling splits the old output's probability evenly,
     /// and training can learn where the new one is better. For a target-action actor
-    /// trained on an older, shorter menu (`obs::targets::N_TARGET_ACTIONS_V1`) whose new
+    /// trained on an older, shorter menu (`plan::targets::N_TARGET_ACTIONS_V1`) whose new
     /// entry refines an old one. Refused for an index outside the outputs.
     pub fn with_copied_output(&self, copy_of: usize) -> Result<Self, String> {
         let n = self.arch.n_actions;

@@ -461,7 +461,7 @@ mod action_space_tests {
         a.actions = ActionSpace::Targets;
         let e = check_arch(&a).unwrap_err().to_string();
         assert!(e.contains("9 outputs") && e.contains("Targets"), "{e}");
-        a.n_actions = obs::targets::N_TARGET_ACTIONS;
+        a.n_actions = plan::targets::N_TARGET_ACTIONS;
         assert!(check_arch(&a).is_ok());
         a.actions = ActionSpace::Moves;
         assert!(check_arch(&a).is_err());

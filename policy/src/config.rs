@@ -46,15 +46,15 @@ impl From<obs::FlatLayout> for FlatLayoutConfig {
     }
 }
 
-/// What the actor's outputs mean (`obs::action`, `obs::targets`).
+/// What the actor's outputs mean (`plan::action`, `plan::targets`).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
 #[serde(rename_all = "lowercase")]
 pub enum ActionSpace {
-    /// Velocity moves of `obs::action::MOVES`: the paper's 5 axis moves, or 9 with the
+    /// Velocity moves of `plan::action::MOVES`: the paper's 5 axis moves, or 9 with the
     /// diagonals. Checkpoints from before this field are moves.
     #[default]
     Moves,
-    /// `obs::targets`: which box to drive to; the robot drives there straight.
+    /// `plan::targets`: which box to drive to; the robot drives there straight.
     Targets,
 }
 
@@ -63,9 +63,17 @@ impl ActionSpace {
     pub fn allows(self, n: usize) -> bool {
         match self {
             ActionSpace::Moves => {
-                n == obs::action::N_AXIS_ACTIONS || n == obs::action::N_ACTIONS_WITH_DIAGONALS
+                n == plan::action::N_AXIS_ACTIONS || n == plan::action::N_ACTIONS_WITH_DIAGONALS
             }
-            ActionSpace::Targets => obs::targets::menu_size_ok(n),
+            ActionSpace::Targets => plan::targets::menu_size_ok(n),
+        }
+    }
+
+    /// The same, as the pilot that turns an action into a velocity knows it.
+    pub fn outputs(self) -> plan::Outputs {
+        match self {
+            ActionSpace::Moves => plan::Outputs::Moves,
+            ActionSpace::Targets => plan::Outputs::Targets,
         }
     }
 }

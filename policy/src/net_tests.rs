@@ -411,7 +411,7 @@ fn ppo_logit_bias_masks_actions_and_zero_bias_is_neutral() {
     // Mask action 2 in every row (never the taken one): entropy drops, all stays finite.
     let mut bias = [0.0f32; 20];
     for r in 0..4 {
-        bias[r * 5 + 2] = obs::shield::MASKED_LOGIT;
+        bias[r * 5 + 2] = plan::shield::MASKED_LOGIT;
     }
     let (s2, g2) = run(&mut actor, &bias);
     assert!(s2.loss.is_finite() && g2.iter().all(|g| g.is_finite()));

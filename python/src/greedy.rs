@@ -1,17 +1,17 @@
 //! The greedy scripted baseline on observation arrays (what `greedy_actions` returns).
 
 use crate::spaces::obs_inputs;
-use obs::greedy::GreedyParams;
 use obs::MACHINE_DIM;
 use obs::PEER_DIM;
 use obs::SELF_DIM;
 use obs::STORAGE_DIM;
+use plan::greedy::GreedyParams;
 use pyo3::prelude::*;
 use rayon::prelude::*;
 use sim::Env;
 
 /// Greedy actions (the scripted baseline of `tending sim --policy greedy`, the same
-/// `obs::greedy` code `robot_node` runs) from observation arrays of `rows` robots.
+/// `plan::greedy` code `robot_node` runs) from observation arrays of `rows` robots.
 pub(crate) fn greedy_rows(
     p: &GreedyParams,
     c: obs::Counts,
@@ -25,7 +25,7 @@ pub(crate) fn greedy_rows(
         c.peers * PEER_DIM,
     );
     for r in 0..rows {
-        out[r] = sim::baselines::greedy_action(
+        out[r] = plan::greedy::greedy_action(
             &own[r * SELF_DIM..(r + 1) * SELF_DIM],
             &machines[r * wm..(r + 1) * wm],
             &storages[r * ws..(r + 1) * ws],
@@ -77,5 +77,5 @@ pub(crate) fn greedy_actions(
 }
 
 pub(crate) fn greedy_params(env: &Env) -> GreedyParams {
-    sim::baselines::greedy_params(env.sizes(), env.config())
+    sim::baselines::fleet_params(env.sizes(), env.config()).greedy_params()
 }

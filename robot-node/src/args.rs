@@ -22,22 +22,23 @@ pub struct Params {
     pub node: NodeArgs,
     /// Checkpoint of the learned policy; `None` = scripted greedy controller.
     pub policy: Option<PathBuf>,
-    /// `greedy`, `greedy-orca` or `policy`; default: `policy` if a policy path is given,
-    /// else `greedy`.
+    /// `greedy`, `greedy-orca`, `matching-orca` or `policy`; default: `policy` if a policy
+    /// path is given, else `greedy`.
     pub controller: ControllerKind,
-    /// Put the policy's actions behind the one-step action shield (obs::shield).
+    /// Put the policy's actions behind the one-step action shield (plan::shield).
     pub shield: bool,
-    /// Pass the policy's velocity through ORCA as a safety filter (obs::orca); None: on,
+    /// Pass the policy's velocity through ORCA as a safety filter (plan::orca); None: on,
     /// unless `shield` is (safety by default; `orca_filter:=false` for the raw policy).
     pub orca_filter: Option<bool>,
-    /// Peer clearance of that filter at full speed, m (`obs::orca::FILTER_CLEARANCE`);
-    /// at rest it is the smaller of this and `orca_rest_clearance` (ADR 0017, 0019).
+    /// Peer clearance of that filter (a policy's, matching-ORCA's) at full speed, m
+    /// (`plan::orca::FILTER_CLEARANCE`); at rest it is the smaller of this and
+    /// `orca_rest_clearance` (ADR 0017, 0019).
     pub orca_clearance: f64,
-    /// Peer clearance of that filter at rest, m (`obs::orca::FILTER_REST_CLEARANCE`, what
+    /// Peer clearance of that filter at rest, m (`plan::orca::FILTER_REST_CLEARANCE`, what
     /// the policy is evaluated with; 0.035 is ADR 0017's more conservative margin).
     pub orca_rest_clearance: f64,
-    /// That filter's horizon for boxes and walls, s (`obs::orca::FILTER_OBSTACLE_HORIZON`,
-    /// ADR 0030; greedy-orca keeps `obs::orca::OBSTACLE_HORIZON`).
+    /// That filter's horizon for boxes and walls, s (`plan::orca::FILTER_OBSTACLE_HORIZON`,
+    /// ADR 0030; greedy-orca keeps `plan::orca::OBSTACLE_HORIZON`).
     pub orca_obstacle_horizon: f64,
     /// Pick/place reach beyond the robot radius (greedy-orca stops within it); default:
     /// `robot_radius` (the simulator's default reach equals its radius at every scale).
@@ -105,6 +106,8 @@ pub struct Params {
 pub enum ControllerKind {
     Greedy,
     GreedyOrca,
+    /// matching-ORCA (docs/adr/0020), behind the ORCA filter with the `orca_*` margins.
+    MatchingOrca,
     Policy,
 }
 
@@ -116,9 +119,9 @@ impl Default for Params {
             controller: ControllerKind::Greedy,
             shield: false,
             orca_filter: None,
-            orca_clearance: obs::orca::FILTER_CLEARANCE as f64,
-            orca_rest_clearance: obs::orca::FILTER_REST_CLEARANCE as f64,
-            orca_obstacle_horizon: obs::orca::FILTER_OBSTACLE_HORIZON as f64,
+            orca_clearance: plan::orca::FILTER_CLEARANCE as f64,
+            orca_rest_clearance: plan::orca::FILTER_REST_CLEARANCE as f64,
+            orca_obstacle_horizon: plan::orca::FILTER_OBSTACLE_HORIZON as f64,
             reach: None,
             control_rate_hz: 10.0,
             use_sim_time: false,
@@ -154,7 +157,7 @@ impl Params {
 
 pub const USAGE: &str = "usage: robot_node [--ros-args -r __ns:=/robot_N [-r __node:=NAME] \
 [-p NAME:=VALUE]... [--params-file FILE.yaml]... [--log-level LEVEL]]
-parameters: policy (path), controller (greedy|greedy-orca|policy), shield (false), orca_filter (true unless shield:=true), orca_clearance (0.04 m at full speed), orca_rest_clearance (0.03 m at rest),
+parameters: policy (path), controller (greedy|greedy-orca|matching-orca|policy), shield (false), orca_filter (true unless shield:=true), orca_clearance (0.04 m at full speed), orca_rest_clearance (0.03 m at rest),
             orca_obstacle_horizon (0.15 s), control_rate_hz (10),
             use_sim_time (false), reach (= robot_radius),
             k_speed (0.5), prep_steps (20), stale_timeout_s (1.0), static_stale_timeout_s (= stale_timeout_s, <=0 off),
@@ -202,11 +205,15 @@ fn apply_param(p: &mut Params, name: &str, v: &ParamValue) -> Result<bool, ArgEr
             p.controller = match v {
                 ParamValue::Str(s) if s == "greedy" => ControllerKind::Greedy,
                 ParamValue::Str(s) if s == "greedy-orca" => ControllerKind::GreedyOrca,
+                ParamValue::Str(s) if s == "matching-orca" => ControllerKind::MatchingOrca,
                 ParamValue::Str(s) if s == "policy" => ControllerKind::Policy,
                 other => {
                     return Err(param_error(
                         name,
-                        format!("expected `greedy`, `greedy-orca` or `policy`, got {other:?}"),
+                        format!(
+                            "expected `greedy`, `greedy-orca`, `matching-orca` or `policy`, \
+                             got {other:?}"
+                        ),
                     ))
                 }
             }

@@ -1,58 +1,19 @@
 //! Controllers: observation in, planar velocity (m/s, map frame) out.
 //!
 //! - [`PolicyController`]: the learned SMAPPO/MAPPO policy (crate `policy`, inference only:
-//!   no simulator, no trainer), GRU state kept per robot, greedy argmax;
+//!   no simulator, no trainer), GRU state kept per robot, greedy argmax, driving through
+//!   `plan`'s [`Pilot`] (target planner, ORCA filter or shield: the code `tending eval` and
+//!   the trainer's rollouts run);
 //! - [`GreedyController`]: the scripted baseline, the same function as the simulator's;
-//! - [`GreedyOrcaController`]: greedy allocation + ORCA avoidance ([`obs::orca`], the same
-//!   code as the simulator's `greedy-orca`), a continuous velocity.
-//!
-//! The policy can run behind the action shield ([`obs::shield`], the same code as
-//! `tending eval --shield`).
+//! - [`GreedyOrcaController`]: greedy allocation + ORCA avoidance ([`plan::orca`], the same
+//!   code as the simulator's `greedy-orca`), a continuous velocity;
+//! - [`MatchingOrcaController`]: matching-ORCA ([`plan::MatchingOrca`], the same code as
+//!   `tending eval --policy matching-orca`).
 
-use obs::greedy::GreedyParams;
-use obs::orca::{GreedyOrca, OrcaParams};
-use obs::shield::ShieldParams;
 use obs::ObsBatch;
-
-/// The paper's discrete actions (section III): holonomic velocity K_speed on one axis.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-#[repr(u8)]
-pub enum Action {
-    Stay = 0,
-    Left = 1,
-    Right = 2,
-    Down = 3,
-    Up = 4,
-    /// Diagonals (`obs::action`, policies trained with `diagonal_actions`).
-    LeftDown = 5,
-    RightDown = 6,
-    LeftUp = 7,
-    RightUp = 8,
-}
-
-impl Action {
-    pub fn from_index(i: usize) -> Option<Self> {
-        Some(match i {
-            0 => Action::Stay,
-            1 => Action::Left,
-            2 => Action::Right,
-            3 => Action::Down,
-            4 => Action::Up,
-            5 => Action::LeftDown,
-            6 => Action::RightDown,
-            7 => Action::LeftUp,
-            8 => Action::RightUp,
-            _ => return None,
-        })
-    }
-}
-
-/// Velocity (vx, vy) of an action: left = -x, right = +x, down = -y, up = +y, diagonals
-/// at the same speed; the table the simulator steps with (`obs::action`).
-pub fn action_velocity(a: Action, k_speed: f32) -> [f32; 2] {
-    let m = obs::action::MOVES[a as usize];
-    [m[0] * k_speed, m[1] * k_speed]
-}
+use plan::greedy::GreedyParams;
+use plan::orca::{GreedyOrca, OrcaParams};
+use plan::{FilterMargins, FleetParams, MatchingOrca, Outputs, Pilot, Row, Safety};
 
 /// Something that turns one robot's observation (a single-row batch) into a velocity.
 pub trait Controller: Send {
@@ -68,9 +29,32 @@ pub trait Controller: Send {
     fn state_gap(&mut self, _gap_s: f64) {}
 }
 
-/// Scripted baseline: [`obs::greedy::greedy_action`], the very function the simulator's
-/// offline greedy episodes run (`sim::baselines::greedy_action` wraps it), so a fleet of
-/// greedy robot nodes on the sim bridge reproduces an offline episode step for step.
+/// Row 0 of a one-row batch, checked.
+fn one_row<'a>(obs: &'a ObsBatch, who: &str) -> anyhow::Result<Row<'a>> {
+    anyhow::ensure!(
+        obs.rows == 1,
+        "{who} controller expects 1 row, got {}",
+        obs.rows
+    );
+    obs.validate()?;
+    Ok(Row::of(obs, 0))
+}
+
+/// A pilot's planner counts control steps ([`Pilot::skip_steps`]): after a gap of
+/// `gap_s` seconds, the steps missed, so that its machine clock does not stay a step
+/// behind until that machine's next pick.
+fn skip_missed_steps(pilot: &mut Pilot, gap_s: f64) {
+    if let Some(dt) = pilot.dt() {
+        let steps = (gap_s / dt as f64).round();
+        if steps >= 2.0 && steps.is_finite() {
+            pilot.skip_steps((steps - 1.0).min(u32::MAX as f64) as u32);
+        }
+    }
+}
+
+/// Scripted baseline: [`plan::greedy::greedy_action`], the very function the simulator's
+/// offline greedy episodes run, so a fleet of greedy robot nodes on the sim bridge
+/// reproduces an offline episode step for step.
 #[derive(Debug, Clone)]
 pub struct GreedyController {
     pub params: GreedyParams,
@@ -81,29 +65,25 @@ impl GreedyController {
         Self { params }
     }
 
-    /// The discrete action for row 0 of `obs`.
-    pub fn action(&self, obs: &ObsBatch) -> anyhow::Result<Action> {
-        anyhow::ensure!(
-            obs.rows == 1,
-            "greedy controller expects 1 row, got {}",
-            obs.rows
-        );
-        obs.validate()?;
-        let a = obs::greedy::greedy_action(
-            obs.own_row(0),
-            obs.machines_row(0),
-            obs.storages_row(0),
-            obs.peers_row(0),
+    /// The discrete action (`plan::action::MOVES` index) for row 0 of `obs`.
+    pub fn action(&self, obs: &ObsBatch) -> anyhow::Result<u8> {
+        let row = one_row(obs, "greedy")?;
+        Ok(plan::greedy::greedy_action(
+            row.own,
+            row.machines,
+            row.storages,
+            row.peers,
             &self.params,
-        );
-        Action::from_index(a as usize).ok_or_else(|| anyhow::anyhow!("greedy gave action {a}"))
+        ))
     }
 }
 
 impl Controller for GreedyController {
     fn reset(&mut self) {}
     fn act(&mut self, obs: &ObsBatch) -> anyhow::Result<[f32; 2]> {
-        Ok(action_velocity(self.action(obs)?, self.params.k_speed))
+        let a = self.action(obs)?;
+        plan::action::velocity(a, self.params.k_speed)
+            .ok_or_else(|| anyhow::anyhow!("greedy gave action {a}"))
     }
     fn name(&self) -> &'static str {
         "greedy"
@@ -130,60 +110,71 @@ impl Controller for GreedyOrcaController {
         self.inner.reset();
     }
     fn act(&mut self, obs: &ObsBatch) -> anyhow::Result<[f32; 2]> {
-        anyhow::ensure!(
-            obs.rows == 1,
-            "greedy-orca controller expects 1 row, got {}",
-            obs.rows
-        );
-        obs.validate()?;
-        Ok(self.inner.velocity(
-            obs.own_row(0),
-            obs.machines_row(0),
-            obs.storages_row(0),
-            obs.peers_row(0),
-        ))
+        let row = one_row(obs, "greedy-orca")?;
+        Ok(self
+            .inner
+            .velocity(row.own, row.machines, row.storages, row.peers))
     }
     fn name(&self) -> &'static str {
         "greedy-orca"
     }
 }
 
+/// matching-ORCA behind [`Controller`] (docs/adr/0020): always the target menu's
+/// "matched" entry, through the ORCA filter.
+#[derive(Debug, Clone)]
+pub struct MatchingOrcaController {
+    inner: MatchingOrca,
+}
+
+impl MatchingOrcaController {
+    pub fn new(fleet: &FleetParams, margins: FilterMargins) -> anyhow::Result<Self> {
+        Ok(Self {
+            inner: MatchingOrca::new(fleet, margins).map_err(|e| anyhow::anyhow!(e))?,
+        })
+    }
+}
+
+impl Controller for MatchingOrcaController {
+    fn reset(&mut self) {
+        self.inner.pilot_mut().reset();
+    }
+    fn act(&mut self, obs: &ObsBatch) -> anyhow::Result<[f32; 2]> {
+        let row = one_row(obs, "matching-orca")?;
+        Ok(self.inner.velocity(row))
+    }
+    fn name(&self) -> &'static str {
+        "matching-orca"
+    }
+    fn state_gap(&mut self, gap_s: f64) {
+        skip_missed_steps(self.inner.pilot_mut(), gap_s);
+    }
+}
+
 /// The learned policy (SMAPPO or MAPPO actor from a checkpoint) behind [`Controller`]:
-/// keeps the GRU state, acts greedily (argmax) and resets the state on [`Controller::reset`]
-/// (own data stale then back, sim time going backwards).
+/// keeps the GRU state, acts greedily (argmax) through its [`Pilot`] and resets both on
+/// [`Controller::reset`] (own data stale then back, sim time going backwards).
 pub struct PolicyController {
     policy: policy::Policy,
     state: policy::PolicyState,
     pub k_speed: f32,
-    /// Mask unsafe actions before the argmax (`-p shield:=true`).
-    shield: Option<ShieldParams>,
-    /// Pass the action's velocity through ORCA (`-p orca_filter:=true`).
-    filter: Option<GreedyOrca>,
-    /// For a policy with target actions (`obs::targets`): turns the chosen box into a
-    /// straight-line velocity (the planner of greedy-ORCA, no filtering).
-    planner: Option<GreedyOrca>,
+    /// Shield, target planner and ORCA filter as [`Self::with_pilot`] set them.
+    pilot: Option<Pilot>,
+    /// Scratch: the logits behind the shield.
+    shielded: Vec<f32>,
 }
 
 impl PolicyController {
     /// Load a checkpoint. `k_speed` comes from the checkpoint's training metadata
     /// (`training.k_speed`, or `training.scenario.task.k_speed`) when present, else
-    /// `default_k_speed`; the second value says which.
+    /// `default_k_speed`; the second value says which. It acts once it has its pilot
+    /// ([`Self::with_pilot`]).
     pub fn load(path: &std::path::Path, default_k_speed: f32) -> anyhow::Result<(Self, bool)> {
         let policy = policy::Policy::load(path)
             .map_err(|e| anyhow::anyhow!("cannot load policy {}: {e}", path.display()))?;
         let meta_k = checkpoint_k_speed(&policy.meta().training);
-        let state = policy.new_state();
-        Ok((
-            Self {
-                policy,
-                state,
-                k_speed: meta_k.unwrap_or(default_k_speed),
-                shield: None,
-                filter: None,
-                planner: None,
-            },
-            meta_k.is_some(),
-        ))
+        let k = meta_k.unwrap_or(default_k_speed);
+        Ok((Self::from_policy(policy, k), meta_k.is_some()))
     }
 
     pub fn from_policy(policy: policy::Policy, k_speed: f32) -> Self {
@@ -192,101 +183,58 @@ impl PolicyController {
             policy,
             state,
             k_speed,
-            shield: None,
-            filter: None,
-            planner: None,
+            pilot: None,
+            shielded: Vec::new(),
         }
     }
 
-    /// Whether the policy picks target boxes (`obs::targets`) rather than velocity moves.
-    pub fn has_target_actions(&self) -> bool {
-        self.policy.actor().arch.actions == policy::ActionSpace::Targets
+    /// What the policy's outputs mean: target boxes (`plan::targets`) or velocity moves.
+    pub fn outputs(&self) -> Outputs {
+        self.policy.actor().arch.actions.outputs()
     }
 
-    /// The planner a target-action policy needs ([`GreedyOrca::target_preferred`]); its
-    /// k_speed is set to the policy's. Ignored by a move policy.
-    pub fn with_target_planner(mut self, mut params: OrcaParams) -> anyhow::Result<Self> {
-        params.greedy.k_speed = self.k_speed;
-        self.planner = Some(GreedyOrca::new(params).map_err(|e| anyhow::anyhow!(e))?);
-        Ok(self)
-    }
-
-    /// Whether the checkpoint was trained behind the ORCA filter (then it runs behind it
-    /// unless `-p orca_filter:=false`).
+    /// Whether the checkpoint was trained behind the ORCA filter.
     pub fn trained_with_orca_filter(&self) -> bool {
         self.policy.trained_with_orca_filter()
     }
 
-    /// Pass the policy's velocity through ORCA as a safety filter ([`GreedyOrca::filter`],
-    /// the code `tending eval --orca-filter` runs); its k_speed is set to the policy's.
-    pub fn with_orca_filter(mut self, mut params: OrcaParams) -> anyhow::Result<Self> {
-        params.greedy.k_speed = self.k_speed;
-        self.filter = Some(GreedyOrca::new(params).map_err(|e| anyhow::anyhow!(e))?);
+    /// Drive through a [`Pilot`] for `fleet` behind `safety` (the planner's, filter's and
+    /// shield's k_speed set to the policy's). Refused: the shield for a target-action
+    /// policy, ORCA parameters ORCA cannot work with.
+    pub fn with_pilot(mut self, mut fleet: FleetParams, safety: Safety) -> anyhow::Result<Self> {
+        fleet.k_speed = self.k_speed;
+        let pilot = Pilot::new(&fleet, self.outputs(), safety).map_err(|e| anyhow::anyhow!(e))?;
+        self.pilot = Some(pilot);
         Ok(self)
     }
 
-    /// Put the policy behind the action shield (its k_speed is set to the controller's).
-    /// The caller refuses this for a target-action policy ([`Self::has_target_actions`]).
-    pub fn with_shield(mut self, mut shield: ShieldParams) -> Self {
-        shield.k_speed = self.k_speed;
-        self.shield = Some(shield);
-        self
+    /// Whether the commands pass through the ORCA filter.
+    pub fn filtered(&self) -> bool {
+        self.pilot.as_ref().is_some_and(Pilot::filtered)
     }
 
     pub fn state(&self) -> &policy::PolicyState {
         &self.state
     }
 
-    /// The discrete action for row 0 of `obs` (advances the recurrent state).
-    pub fn action(&mut self, obs: &ObsBatch) -> anyhow::Result<Action> {
-        let a = match &self.shield {
-            None => self
-                .policy
-                .act(obs, &mut self.state, policy::ActMode::Greedy)?,
-            Some(sp) => {
-                let sp = *sp;
-                let logits = self.policy.logits(obs, &mut self.state)?;
-                let mut l = [0.0f32; 5];
-                anyhow::ensure!(
-                    logits.len() == l.len(),
-                    "policy has {} actions, the shield knows 5",
-                    logits.len()
-                );
-                l.copy_from_slice(logits);
-                let safe = obs::shield::safe_actions(
-                    obs.own_row(0),
-                    obs.machines_row(0),
-                    obs.storages_row(0),
-                    obs.peers_row(0),
-                    &sp,
-                );
-                obs::shield::mask_logits(&mut l, &safe);
-                policy::nn::categorical::argmax(&l) as u8
-            }
+    /// The action index for row 0 of `obs` (advances the recurrent state): argmax of the
+    /// logits, behind the shield when the pilot has one.
+    pub fn action(&mut self, obs: &ObsBatch) -> anyhow::Result<u8> {
+        let pilot = self
+            .pilot
+            .as_ref()
+            .ok_or_else(|| anyhow::anyhow!("policy controller without its pilot"))?;
+        let logits = self.policy.logits(obs, &mut self.state)?;
+        let a = if pilot.shielded() {
+            self.shielded.clear();
+            self.shielded.extend_from_slice(logits);
+            pilot.shield_logits(Row::of(obs, 0), &mut self.shielded);
+            policy::nn::categorical::argmax(&self.shielded)
+        } else {
+            policy::nn::categorical::argmax(logits)
         };
-        Action::from_index(a as usize).ok_or_else(|| anyhow::anyhow!("policy gave action {a}"))
+        Ok(a as u8)
     }
-}
-
-/// Greedy-ORCA's knowledge of the fleet: the greedy parameters, the room (the wire
-/// contract's 2.3 m) and the reach.
-pub fn orca_params(p: &crate::args::Params) -> OrcaParams {
-    let g = crate::node::greedy_params(p);
-    let reach = p.reach.unwrap_or(p.robot_radius) as f32;
-    OrcaParams::new(g, 2.0 * msgs::validate::ROOM_HALF_EXTENT as f32, reach)
-}
-
-/// The shield's knowledge of the fleet (k_speed is set from the policy's own).
-pub fn shield_params(p: &crate::args::Params) -> ShieldParams {
-    let g = crate::node::greedy_params(p);
-    ShieldParams::new(
-        g.robot_radius,
-        g.machine_half,
-        g.storage_half,
-        g.k_speed,
-        g.dt,
-        2.0 * msgs::validate::ROOM_HALF_EXTENT as f32,
-    )
 }
 
 /// `k_speed` from a checkpoint's free-form training metadata, if it holds a positive one.
@@ -306,54 +254,25 @@ pub fn checkpoint_k_speed(training: &serde_json::Value) -> Option<f32> {
 impl Controller for PolicyController {
     fn reset(&mut self) {
         self.state.reset();
-        if let Some(f) = &mut self.filter {
-            f.reset();
-        }
-        if let Some(p) = &mut self.planner {
+        if let Some(p) = &mut self.pilot {
             p.reset();
         }
     }
     fn act(&mut self, obs: &ObsBatch) -> anyhow::Result<[f32; 2]> {
-        let v = if self.has_target_actions() {
-            let a = self
-                .policy
-                .act(obs, &mut self.state, policy::ActMode::Greedy)?;
-            let planner = self
-                .planner
-                .as_mut()
-                .ok_or_else(|| anyhow::anyhow!("target-action policy without its planner"))?;
-            planner.target_preferred(
-                a,
-                obs.own_row(0),
-                obs.machines_row(0),
-                obs.storages_row(0),
-                obs.peers_row(0),
-            )
-        } else {
-            action_velocity(self.action(obs)?, self.k_speed)
-        };
-        Ok(match &mut self.filter {
-            Some(f) => f.filter(
-                obs.own_row(0),
-                obs.machines_row(0),
-                obs.storages_row(0),
-                obs.peers_row(0),
-                v,
-            ),
-            None => v,
-        })
+        let a = self.action(obs)?;
+        let pilot = self.pilot.as_mut().expect("checked by action()");
+        Ok(pilot.command(a, Row::of(obs, 0)))
     }
     fn name(&self) -> &'static str {
         "policy"
     }
-    /// The planner's machine clock counts control steps ([`GreedyOrca::skip_steps`]): a
-    /// missed state would otherwise leave it a step behind until that machine's next pick.
     fn state_gap(&mut self, gap_s: f64) {
-        if let Some(p) = &mut self.planner {
-            let steps = (gap_s / p.params().greedy.dt as f64).round();
-            if steps >= 2.0 && steps.is_finite() {
-                p.skip_steps((steps - 1.0).min(u32::MAX as f64) as u32);
-            }
+        if let Some(p) = self
+            .pilot
+            .as_mut()
+            .filter(|p| p.outputs() == Outputs::Targets)
+        {
+            skip_missed_steps(p, gap_s);
         }
     }
 }
@@ -371,6 +290,22 @@ pub(crate) mod tests {
         }
     }
 
+    /// The default fleet (robot_node's default parameters: `node` tests they agree).
+    pub(crate) fn fleet() -> FleetParams {
+        let g = params(0.5);
+        FleetParams {
+            robot_radius: g.robot_radius,
+            machine_half: g.machine_half,
+            storage_half: g.storage_half,
+            k_speed: g.k_speed,
+            dt: g.dt,
+            prep_steps: g.prep_steps,
+            room_size: 2.3,
+            reach: g.robot_radius,
+            collision_distance: plan::fleet::DEFAULT_COLLISION_DISTANCE,
+        }
+    }
+
     fn b(own: [f32; 2], has_part: bool, m: Vec<([f32; 2], bool)>, s: Vec<[f32; 2]>) -> ObsBatch {
         ObsBuilder {
             own_pos: own,
@@ -383,6 +318,11 @@ pub(crate) mod tests {
         .unwrap()
     }
 
+    // `plan::action::MOVES` indices the greedy tests expect
+    const STAY: u8 = 0;
+    const DOWN: u8 = 3;
+    const UP: u8 = 4;
+
     #[test]
     fn goes_to_nearest_ready_machine() {
         let g = GreedyController::new(params(0.5));
@@ -392,7 +332,7 @@ pub(crate) mod tests {
             vec![([0.5, 0.2], false), ([0.0, -0.6], true), ([0.9, 0.9], true)],
             vec![[-1.0, 0.0]],
         );
-        assert_eq!(g.action(&o).unwrap(), Action::Down);
+        assert_eq!(g.action(&o).unwrap(), DOWN);
         let mut g2 = g.clone();
         assert_eq!(g2.act(&o).unwrap(), [0.0, -0.5]);
     }
@@ -406,7 +346,7 @@ pub(crate) mod tests {
             vec![([-0.4, 0.1], false), ([0.9, 0.9], false)],
             vec![[1.0, -1.0]],
         );
-        assert_eq!(g.action(&o).unwrap(), Action::Stay);
+        assert_eq!(g.action(&o).unwrap(), STAY);
     }
 
     #[test]
@@ -418,9 +358,9 @@ pub(crate) mod tests {
             vec![([0.6, -0.6], true)],
             vec![[0.2, 0.7], [1.0, 1.0]],
         );
-        assert_eq!(g.action(&o).unwrap(), Action::Up);
+        assert_eq!(g.action(&o).unwrap(), UP);
         let o = b([0.0, 0.0], true, vec![([0.6, 0.0], true)], vec![]);
-        assert_eq!(g.action(&o).unwrap(), Action::Stay);
+        assert_eq!(g.action(&o).unwrap(), STAY);
     }
 
     #[test]
@@ -433,35 +373,21 @@ pub(crate) mod tests {
         assert!(g.action(&o2).is_err());
     }
 
-    #[test]
-    fn action_mapping() {
-        for (i, v) in [[0.0, 0.0], [-1.0, 0.0], [1.0, 0.0], [0.0, -1.0], [0.0, 1.0]]
-            .iter()
-            .enumerate()
-        {
-            assert_eq!(action_velocity(Action::from_index(i).unwrap(), 1.0), *v);
-        }
-        // diagonals (9-action policies) at the same speed, then nothing
-        let d = std::f32::consts::FRAC_1_SQRT_2;
-        assert_eq!(action_velocity(Action::from_index(8).unwrap(), 1.0), [d, d]);
-        assert_eq!(
-            action_velocity(Action::from_index(5).unwrap(), 1.0),
-            [-d, -d]
-        );
-        assert!(Action::from_index(9).is_none());
-    }
-
     fn tmp(name: &str) -> std::path::PathBuf {
         std::env::temp_dir().join(format!("robot_node_{}_{name}", std::process::id()))
     }
 
-    #[test]
-    fn policy_controller_loads_checkpoint_keeps_and_resets_state() {
+    fn small_arch() -> policy::ArchConfig {
         let mut arch = policy::ArchConfig::smappo();
         arch.d_model = 8;
         arch.heads = 2;
         arch.hidden = 8;
-        let actor = policy::Actor::new(arch, 7);
+        arch
+    }
+
+    #[test]
+    fn policy_controller_loads_checkpoint_keeps_and_resets_state() {
+        let actor = policy::Actor::new(small_arch(), 7);
         let path = tmp("ok.safetensors");
         policy::checkpoint::save_policy(
             &path,
@@ -469,9 +395,10 @@ pub(crate) mod tests {
             serde_json::json!({"setup": "6.4_2", "k_speed": 0.3}),
         )
         .unwrap();
-        let (mut c, from_meta) = PolicyController::load(&path, 0.5).unwrap();
+        let (c, from_meta) = PolicyController::load(&path, 0.5).unwrap();
         assert!(from_meta);
         assert_eq!(c.k_speed, 0.3);
+        let mut c = c.with_pilot(fleet(), Safety::RAW).unwrap();
         let o = b(
             [0.1, -0.2],
             false,
@@ -484,10 +411,7 @@ pub(crate) mod tests {
         for _ in 0..3 {
             let a = reference.act(&o, &mut st, policy::ActMode::Greedy).unwrap();
             let v = c.act(&o).unwrap();
-            assert_eq!(
-                v,
-                action_velocity(Action::from_index(a as usize).unwrap(), 0.3)
-            );
+            assert_eq!(Some(v), plan::action::velocity(a, 0.3));
         }
         assert!(c.state().h.iter().any(|v| *v != 0.0));
         assert_eq!(c.state().h, st.h);
@@ -533,11 +457,10 @@ pub(crate) mod tests {
 
     #[test]
     fn shielded_policy_only_takes_safe_actions() {
-        let mut arch = policy::ArchConfig::smappo();
-        arch.d_model = 8;
-        arch.heads = 2;
-        arch.hidden = 8;
-        let sp = ShieldParams::new(0.08, [0.12, 0.12], [0.15, 0.08], 0.5, 0.1, 2.3);
+        let shield = Safety {
+            shield: true,
+            filter: None,
+        };
         // Peers touching-close on all four sides: only "stay" is safe.
         let peers = [[0.17, 0.0], [-0.17, 0.0], [0.0, 0.17], [0.0, -0.17]];
         let o = ObsBuilder {
@@ -551,12 +474,16 @@ pub(crate) mod tests {
         .unwrap();
         let mut unshielded_moves = 0;
         for seed in 0..8 {
-            let actor = policy::Actor::new(arch, seed);
+            let actor = policy::Actor::new(small_arch(), seed);
             let pol = policy::Policy::from_actor(actor, serde_json::Value::Null);
-            let mut free = PolicyController::from_policy(pol.clone(), 0.5);
-            unshielded_moves += (free.action(&o).unwrap() != Action::Stay) as usize;
-            let mut c = PolicyController::from_policy(pol, 0.5).with_shield(sp);
-            assert_eq!(c.action(&o).unwrap(), Action::Stay, "seed {seed}");
+            let mut free = PolicyController::from_policy(pol.clone(), 0.5)
+                .with_pilot(fleet(), Safety::RAW)
+                .unwrap();
+            unshielded_moves += (free.action(&o).unwrap() != STAY) as usize;
+            let mut c = PolicyController::from_policy(pol, 0.5)
+                .with_pilot(fleet(), shield)
+                .unwrap();
+            assert_eq!(c.action(&o).unwrap(), STAY, "seed {seed}");
         }
         // The check means something only if unshielded actors would have moved.
         assert!(unshielded_moves > 0);
@@ -564,11 +491,6 @@ pub(crate) mod tests {
 
     #[test]
     fn orca_filter_keeps_free_moves_and_holds_back_near_peers() {
-        let mut arch = policy::ArchConfig::smappo();
-        arch.d_model = 8;
-        arch.heads = 2;
-        arch.hidden = 8;
-        let op = OrcaParams::new(params(0.5), 2.3, 0.08);
         let free = b(
             [0.0, 0.0],
             false,
@@ -585,13 +507,24 @@ pub(crate) mod tests {
         }
         .build()
         .unwrap();
+        // greedy-ORCA's own clearance, fixed
+        let margins = FilterMargins {
+            clearance: plan::orca::GREEDY_ORCA_CLEARANCE,
+            rest_clearance: plan::orca::GREEDY_ORCA_CLEARANCE,
+            obstacle_horizon: plan::orca::OBSTACLE_HORIZON,
+        };
         for seed in 0..4 {
-            let pol =
-                policy::Policy::from_actor(policy::Actor::new(arch, seed), Default::default());
-            let mut plain = PolicyController::from_policy(pol.clone(), 0.5);
-            let mut c = PolicyController::from_policy(pol, 0.5)
-                .with_orca_filter(op)
+            let pol = policy::Policy::from_actor(
+                policy::Actor::new(small_arch(), seed),
+                Default::default(),
+            );
+            let mut plain = PolicyController::from_policy(pol.clone(), 0.5)
+                .with_pilot(fleet(), Safety::RAW)
                 .unwrap();
+            let mut c = PolicyController::from_policy(pol, 0.5)
+                .with_pilot(fleet(), Safety::filtered(margins))
+                .unwrap();
+            assert!(c.filtered() && !plain.filtered());
             // Nothing near: ORCA leaves the policy's move as it is.
             let (v, w) = (plain.act(&free).unwrap(), c.act(&free).unwrap());
             assert!(
@@ -606,18 +539,15 @@ pub(crate) mod tests {
     }
 
     /// A target-action policy drives straight for the box it picks (here always the
-    /// greedy entry: toward the ready machine at full speed), and refuses to run without
-    /// its planner.
+    /// greedy entry: toward the ready machine at full speed); it refuses to act without its
+    /// pilot and the shield; matching-ORCA heads for the same machine, alone.
     #[test]
     fn target_policy_drives_to_the_chosen_box() {
-        let mut arch = policy::ArchConfig::smappo();
-        arch.d_model = 8;
-        arch.heads = 2;
-        arch.hidden = 8;
-        arch.n_actions = obs::targets::N_TARGET_ACTIONS;
+        let mut arch = small_arch();
+        arch.n_actions = plan::targets::N_TARGET_ACTIONS;
         arch.actions = policy::ActionSpace::Targets;
         let mut actor = policy::Actor::new(arch, 1);
-        actor.add_action_bias(obs::targets::TargetAction::Greedy as usize, 1e4);
+        actor.add_action_bias(plan::targets::TargetAction::Greedy as usize, 1e4);
         let pol = policy::Policy::from_actor(actor, Default::default());
         let obs = b(
             [0.0, 0.0],
@@ -626,16 +556,26 @@ pub(crate) mod tests {
             vec![[-0.9, 0.9]],
         );
         let mut bare = PolicyController::from_policy(pol.clone(), 0.5);
-        assert!(bare.has_target_actions());
-        assert!(bare.act(&obs).unwrap_err().to_string().contains("planner"));
-        let op = OrcaParams::new(params(0.5), 2.3, 0.08);
+        assert_eq!(bare.outputs(), Outputs::Targets);
+        assert!(bare.act(&obs).unwrap_err().to_string().contains("pilot"));
+        let shield = Safety {
+            shield: true,
+            filter: None,
+        };
+        let e = PolicyController::from_policy(pol.clone(), 0.5)
+            .with_pilot(fleet(), shield)
+            .err()
+            .unwrap();
+        assert!(e.to_string().contains("target actions"), "{e}");
         let mut c = PolicyController::from_policy(pol, 0.5)
-            .with_target_planner(op)
-            .unwrap()
-            .with_orca_filter(op.with_clearance(obs::orca::FILTER_CLEARANCE))
+            .with_pilot(fleet(), Safety::filtered(FilterMargins::DEPLOYED))
             .unwrap();
         let v = c.act(&obs).unwrap();
         assert!((v[0] - 0.5).abs() < 1e-3 && v[1].abs() < 1e-3, "{v:?}");
+        let mut m = MatchingOrcaController::new(&fleet(), FilterMargins::DEPLOYED).unwrap();
+        let w = m.act(&obs).unwrap();
+        assert!((w[0] - 0.5).abs() < 1e-3 && w[1].abs() < 1e-3, "{w:?}");
+        assert!(m.act(&ObsBatch::zeros(2, Default::default())).is_err());
     }
 
     #[test]

@@ -21,11 +21,10 @@ use crate::args::Params;
 use crate::fanout;
 use crate::hosted::{
     heartbeat, hold, host, lockstep_step, print_stats_json, state_step, tick_now, Hosted,
-    LockstepTiming,
+    LockstepTiming, RobotSpec,
 };
-use crate::node::{retry, RobotSpec};
 use crate::readers::{drain, Readers, Sub, SubKind};
-use crate::watchdog::{NodeStage, Watchdog};
+use crate::watchdog::{retry, NodeStage, Watchdog};
 use crate::world::{Counters, DropReason};
 
 const CLOCK_TOKEN: Token = Token(usize::MAX - 1);

@@ -16,10 +16,13 @@ use msgs::{Profile, Twist};
 use ros::StampedWriter;
 
 use crate::args::Params;
-use crate::node::{retry, RobotSpec};
+use crate::controller::Controller;
 use crate::tick::{Brain, Outcome, TickResult};
-use crate::watchdog::Watchdog;
+use crate::watchdog::{retry, Watchdog};
 use crate::world::{Counters, World, WorldModelConfig};
+
+/// A hosted robot (name, controller, its k_speed).
+pub(crate) type RobotSpec = (String, Box<dyn Controller>, f64);
 
 /// One hosted robot: its brain (world model, controller, counters), its `cmd_vel` writer
 /// and its timing state.

@@ -10,8 +10,7 @@
 //! spinner (graph events, parameters, rosout discovery) runs on a helper thread
 //! ([`ros::RosNode`]). Why: docs/adr/0007-mio-event-loop.md, 0008-shared-readers.md.
 
-use std::sync::atomic::{AtomicBool, Ordering};
-use std::time::Duration;
+use std::sync::atomic::AtomicBool;
 
 use anyhow::{anyhow, Context as _};
 use ros2_client::dds::Context;
@@ -20,10 +19,13 @@ use tracing::{info, warn};
 use ros::RosNode;
 
 use crate::args::{ControllerKind, Params};
-use crate::controller::{Controller, GreedyController, GreedyOrcaController, PolicyController};
-use crate::watchdog::{NodeStage, Watchdog};
+use crate::controller::{
+    Controller, GreedyController, GreedyOrcaController, MatchingOrcaController, PolicyController,
+};
+use crate::hosted::RobotSpec;
+use crate::watchdog::{retry, NodeStage, Watchdog};
 use crate::world::Counters;
-use obs::greedy::GreedyParams;
+use plan::{Deployment, FilterMargins, FleetParams, Safety};
 
 /// Build the controller the parameters ask for, and the speed limit of its commands.
 ///
@@ -31,80 +33,89 @@ use obs::greedy::GreedyParams;
 /// error naming the file and the problem); its k_speed comes from the checkpoint's
 /// training metadata when present, else from the `k_speed` parameter.
 pub fn make_controller(p: &Params) -> anyhow::Result<(Box<dyn Controller>, f64)> {
+    let fleet = fleet_params(p);
     match p.controller {
-        ControllerKind::Greedy => {
-            let gp = greedy_params(p);
-            Ok((Box::new(GreedyController::new(gp)), p.k_speed))
-        }
-        ControllerKind::GreedyOrca => {
-            let c = GreedyOrcaController::new(crate::controller::orca_params(p))?;
-            Ok((Box::new(c), p.k_speed))
-        }
-        ControllerKind::Policy => {
-            let path = p.policy.as_ref().ok_or_else(|| {
-                anyhow!("controller `policy` needs a checkpoint: -p policy:=PATH")
-            })?;
-            let (mut c, from_meta) = PolicyController::load(path, p.k_speed as f32)?;
-            let filter_on = p.orca_filter.unwrap_or(!p.shield);
-            // `tending eval`'s parameters (OrcaParams::for_policy_filter / for_policy).
-            let base = crate::controller::orca_params(p);
-            let op = if filter_on {
-                base.for_policy_filter(p.orca_clearance as f32, p.orca_rest_clearance as f32)
-                    .with_obstacle_horizon(p.orca_obstacle_horizon as f32)
-            } else {
-                base.for_policy(None)
-            };
-            if c.has_target_actions() {
-                anyhow::ensure!(
-                    !p.shield,
-                    "policy {} picks target boxes; the action shield (shield:=true) acts on \
-                     velocity moves: use the ORCA filter (the default) instead",
-                    path.display()
-                );
-                c = c.with_target_planner(op)?;
-            }
-            if p.shield {
-                c = c.with_shield(crate::controller::shield_params(p));
-            }
-            // Safety on by default, as a factory deploys it: a learned policy's command goes
-            // through the ORCA filter unless `orca_filter:=false`; the shield, when asked
-            // for, replaces it (the rules `tending eval --orca-filter/--shield` reproduce).
-            let trained = c.trained_with_orca_filter();
-            if filter_on {
-                info!("policy commands pass through the ORCA safety filter");
-                c = c.with_orca_filter(op)?;
-            } else if trained {
-                tracing::warn!(
-                    "policy {} was trained behind the ORCA filter; running it without \
-                     (orca_filter:=false) changes what it learned on",
-                    path.display()
-                );
-            }
-            let k = c.k_speed as f64;
-            info!(
-                "policy {} loaded ({}), k_speed {k} m/s from {}",
-                path.display(),
-                "checkpoint",
-                if from_meta {
-                    "checkpoint metadata"
-                } else {
-                    "the k_speed parameter"
-                }
-            );
-            Ok((Box::new(c), k))
-        }
+        ControllerKind::Greedy => Ok((
+            Box::new(GreedyController::new(fleet.greedy_params())),
+            p.k_speed,
+        )),
+        ControllerKind::GreedyOrca => Ok((
+            Box::new(GreedyOrcaController::new(fleet.orca_params())?),
+            p.k_speed,
+        )),
+        ControllerKind::MatchingOrca => Ok((
+            Box::new(MatchingOrcaController::new(&fleet, filter_margins(p))?),
+            p.k_speed,
+        )),
+        ControllerKind::Policy => policy_controller(p, fleet),
     }
 }
 
-/// The greedy controller's knowledge of the fleet: sizes, speed and control period.
-pub fn greedy_params(p: &Params) -> GreedyParams {
-    GreedyParams {
+/// The learned policy behind the safety layer [`Safety::choose`] picks on a robot: the
+/// ORCA filter unless `orca_filter:=false` or `shield:=true` (the rules `tending eval
+/// --orca-filter/--shield` reproduce offline).
+fn policy_controller(p: &Params, fleet: FleetParams) -> anyhow::Result<(Box<dyn Controller>, f64)> {
+    let path = p
+        .policy
+        .as_ref()
+        .ok_or_else(|| anyhow!("controller `policy` needs a checkpoint: -p policy:=PATH"))?;
+    let (c, from_meta) = PolicyController::load(path, p.k_speed as f32)?;
+    let safety = Safety::choose(
+        p.shield,
+        p.orca_filter,
+        Deployment::Robot,
+        filter_margins(p),
+    );
+    if safety.filter.is_some() {
+        info!("policy commands pass through the ORCA safety filter");
+    } else if c.trained_with_orca_filter() {
+        warn!(
+            "policy {} was trained behind the ORCA filter; running it without \
+             (orca_filter:=false) changes what it learned on",
+            path.display()
+        );
+    }
+    let c = c
+        .with_pilot(fleet, safety)
+        .with_context(|| format!("policy {}", path.display()))?;
+    let k = c.k_speed as f64;
+    info!(
+        "policy {} loaded ({}), k_speed {k} m/s from {}",
+        path.display(),
+        "checkpoint",
+        if from_meta {
+            "checkpoint metadata"
+        } else {
+            "the k_speed parameter"
+        }
+    );
+    Ok((Box::new(c), k))
+}
+
+/// What a robot knows about its fleet: sizes, speed, control period, machine timing, the
+/// wire contract's room, its reach and the default contact distance. The planner's
+/// parameter sets (greedy, ORCA, shield) come from it.
+pub fn fleet_params(p: &Params) -> FleetParams {
+    FleetParams {
         robot_radius: p.robot_radius as f32,
         machine_half: [p.machine_half[0] as f32, p.machine_half[1] as f32],
         storage_half: [p.storage_half[0] as f32, p.storage_half[1] as f32],
         k_speed: p.k_speed as f32,
         dt: (1.0 / p.control_rate_hz) as f32,
         prep_steps: p.prep_steps,
+        room_size: 2.0 * msgs::validate::ROOM_HALF_EXTENT as f32,
+        reach: p.reach.unwrap_or(p.robot_radius) as f32,
+        collision_distance: plan::fleet::DEFAULT_COLLISION_DISTANCE,
+    }
+}
+
+/// The ORCA filter's margins behind a policy or matching-ORCA (`orca_clearance`,
+/// `orca_rest_clearance`, `orca_obstacle_horizon`).
+fn filter_margins(p: &Params) -> FilterMargins {
+    FilterMargins {
+        clearance: p.orca_clearance as f32,
+        rest_clearance: p.orca_rest_clearance as f32,
+        obstacle_horizon: p.orca_obstacle_horizon as f32,
     }
 }
 
@@ -159,38 +170,6 @@ pub fn run_watched(p: &Params, stop: &AtomicBool, wd: &Watchdog) -> anyhow::Resu
     run_on(&ctx, p, stop, robots, multi, wd)
 }
 
-/// Retry a DDS set-up step that can fail transiently (RustDDS reports a full internal
-/// channel as a poisoned entity when many entities are created at once): 40 attempts,
-/// 250 ms apart, unless stopping.
-///
-/// Every attempt is start-up progress for the watchdog (a retry loop is not a hang).
-pub(crate) fn retry<T>(
-    what: &str,
-    stop: &AtomicBool,
-    wd: &Watchdog,
-    mut f: impl FnMut() -> anyhow::Result<T>,
-) -> anyhow::Result<T> {
-    let mut attempt = 1;
-    loop {
-        let r = f();
-        wd.beat();
-        match r {
-            Ok(x) => return Ok(x),
-            Err(e) if attempt < 40 && !stop.load(Ordering::SeqCst) => {
-                if attempt == 1 {
-                    warn!("{what}: {e:#} (retrying)");
-                }
-                attempt += 1;
-                std::thread::sleep(Duration::from_millis(250));
-            }
-            Err(e) => return Err(e),
-        }
-    }
-}
-
-/// A hosted robot (name, controller, its k_speed).
-pub(crate) type RobotSpec = (String, Box<dyn Controller>, f64);
-
 /// The node on a DDS context, until `stop` is set.
 fn run_on(
     ctx: &Context,
@@ -212,4 +191,21 @@ fn run_on(
     wd.stage(NodeStage::Done);
     drop(ros); // stops the spinner
     result
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// robot_node's default parameters describe the default scenario's fleet, and its
+    /// builders give what the simulator's give there (`sim::baselines` tests the other
+    /// side against the same defaults).
+    #[test]
+    fn default_parameters_are_the_default_fleet() {
+        let f = fleet_params(&Params::default());
+        assert_eq!(f, crate::controller::tests::fleet());
+        assert_eq!(f.greedy_params(), plan::greedy::GreedyParams::default());
+        assert_eq!(f.shield_params().margin, 0.015);
+        assert_eq!(filter_margins(&Params::default()), FilterMargins::DEPLOYED);
+    }
 }

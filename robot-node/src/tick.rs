@@ -72,7 +72,7 @@ impl Brain {
     /// (None when it was not computed from state). The control timer and the bridge's step
     /// run on separate clocks, so a tick sometimes finds no new state; acting on it again
     /// would feed the planner the same positions twice (its velocity estimates read zero,
-    /// then double, and a robot looks stuck to the detour rule, `obs::detour`) and step a
+    /// then double, and a robot looks stuck to the detour rule, `plan::detour`) and step a
     /// recurrent policy twice on one observation, unlike training. Such a tick sends the
     /// last command again instead, while its state is fresh (counted in `ticks`,
     /// `commands` and `repeated_commands`).

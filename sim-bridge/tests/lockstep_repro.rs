@@ -19,11 +19,11 @@ fn offline_greedy(setup: Setup, seed: u64, steps: u32) -> (Offline, Env) {
         setup,
         seed,
         steps,
-        |env| sim::baselines::greedy_params(env.sizes(), env.config()),
+        |env| sim::baselines::fleet_params(env.sizes(), env.config()).greedy_params(),
         |params, batch, env| {
             let acts: Vec<u8> = (0..batch.rows)
                 .map(|r| {
-                    sim::baselines::greedy_action(
+                    sim::plan::greedy::greedy_action(
                         batch.own_row(r),
                         batch.machines_row(r),
                         batch.storages_row(r),

@@ -1,9 +1,10 @@
 //! Lockstep reproducibility of the safety controllers (docs/adr/0006, 0012): a fleet of
 //! `robot_node`s running greedy-ORCA (`controller:=greedy-orca`, stateful: it estimates
 //! velocities from successive observations), the paper's 5-move policy behind the action
-//! shield (`shield:=true`) or through the ORCA filter (`orca_filter:=true`), or the bundled
-//! target-action policy with robot_node's defaults (planner + filter) must reproduce the
-//! offline episode of the same code exactly.
+//! shield (`shield:=true`) or through the ORCA filter (`orca_filter:=true`), the bundled
+//! target-action policy with robot_node's defaults (planner + filter), or matching-ORCA
+//! (`controller:=matching-orca`) must reproduce the offline episode of the same code
+//! exactly.
 //! The harness (tests/lockstep_common) is lockstep_repro.rs's, with extra robot_node parameters.
 //!
 //! Needs the `robot_node` binary next to `sim_bridge` (build both:
@@ -12,10 +13,10 @@
 mod lockstep_common;
 
 use lockstep_common::{
-    assert_same, fleet_lockstep, greedy_policy_actions, offline_episode, policy_with_states,
-    pretrained, Offline,
+    assert_same, fleet_lockstep, offline_episode, policy_with_states, pretrained, Offline,
 };
 
+use sim::plan::pilot::{self, FilterMargins, MatchingOrca, Outputs, Pilot, Row, Safety};
 use sim::{Env, ScenarioConfig, Setup};
 
 fn offline_greedy_orca(setup: Setup, seed: u64, steps: u32) -> (Offline, Env) {
@@ -31,89 +32,92 @@ fn offline_greedy_orca(setup: Setup, seed: u64, steps: u32) -> (Offline, Env) {
     })
 }
 
-fn offline_filtered(setup: Setup, seed: u64, steps: u32, path: &std::path::Path) -> Offline {
-    let init = |env: &Env| {
-        let fleet =
-            sim::baselines::GreedyOrcaFleet::new_filter(env, Some(obs::orca::FILTER_CLEARANCE))
-                .unwrap();
-        let k = env.config().task.k_speed;
-        (fleet, k, policy_with_states(path, env), Vec::new())
-    };
-    offline_episode(
-        setup,
-        seed,
-        steps,
-        init,
-        |(fleet, k, (pol, states), vels), batch, env| {
-            let prefs: Vec<[f32; 2]> = greedy_policy_actions(pol, states, batch)
-                .into_iter()
-                .map(|a| sim::action_to_velocity(a, *k).unwrap())
-                .collect();
-            fleet.filter(batch, &prefs, vels).unwrap();
-            env.step_velocities(vels).unwrap();
-        },
-    )
-    .0
+/// One pilot per robot of `env` (`plan::Pilot`, the path `tending eval` and robot_node
+/// drive a policy through) behind `safety`.
+fn pilots(env: &Env, outputs: Outputs, safety: Safety) -> Vec<Pilot> {
+    let fleet = sim::baselines::fleet_params(env.sizes(), env.config());
+    vec![Pilot::new(&fleet, outputs, safety).unwrap(); env.n_robots()]
 }
 
-/// The bundled target-action policy as robot_node runs it by default and `tending eval`
-/// evaluates it: the chosen box as a straight-line velocity (`obs::targets`) planned and
-/// filtered by one fleet with the policy's parameters (40 mm clearance, its make-room).
-fn offline_targets(setup: Setup, seed: u64, steps: u32, path: &std::path::Path) -> Offline {
+/// A policy as robot_node runs it: argmax actions (masked by each robot's shield when its
+/// pilot has one) through its pilot.
+fn offline_piloted(
+    setup: Setup,
+    seed: u64,
+    steps: u32,
+    path: &std::path::Path,
+    outputs: Outputs,
+    safety: Safety,
+) -> Offline {
     let init = |env: &Env| {
-        let fleet =
-            sim::baselines::GreedyOrcaFleet::new_filter(env, Some(obs::orca::FILTER_CLEARANCE))
-                .unwrap();
-        let (pol, states) = policy_with_states(path, env);
-        assert_eq!(pol.actor().arch.actions, policy::ActionSpace::Targets);
-        (fleet, pol, states, Vec::new(), Vec::new())
+        (
+            pilots(env, outputs, safety),
+            policy_with_states(path, env),
+            Vec::new(),
+        )
     };
     offline_episode(
         setup,
         seed,
         steps,
         init,
-        |(fleet, pol, states, prefs, vels), batch, env| {
-            let acts = greedy_policy_actions(pol, states, batch);
-            fleet.target_velocities(batch, &acts, prefs).unwrap();
-            fleet.filter(batch, prefs, vels).unwrap();
-            env.step_velocities(vels).unwrap();
-        },
-    )
-    .0
-}
-
-fn offline_shielded(setup: Setup, seed: u64, steps: u32, path: &std::path::Path) -> Offline {
-    let init = |env: &Env| {
-        let sp = sim::baselines::shield_params(env.sizes(), env.config());
-        (sp, policy_with_states(path, env))
-    };
-    offline_episode(
-        setup,
-        seed,
-        steps,
-        init,
-        |(sp, (pol, states)), batch, env| {
+        |(pilots, (pol, states), vels), batch, env| {
             let acts: Vec<u8> = (0..batch.rows)
                 .map(|r| {
                     let row = batch.row(r);
-                    let mut l = [0.0f32; 5];
-                    l.copy_from_slice(pol.logits(&row, &mut states[r]).unwrap());
-                    let safe = obs::shield::safe_actions(
-                        row.own_row(0),
-                        row.machines_row(0),
-                        row.storages_row(0),
-                        row.peers_row(0),
-                        sp,
-                    );
-                    obs::shield::mask_logits(&mut l, &safe);
+                    let mut l = pol.logits(&row, &mut states[r]).unwrap().to_vec();
+                    pilots[r].shield_logits(Row::of(&row, 0), &mut l);
                     policy::nn::categorical::argmax(&l) as u8
                 })
                 .collect();
-            env.step_actions(&acts).unwrap();
+            pilot::commands(pilots, batch, &acts, vels);
+            env.step_velocities(vels).unwrap();
         },
     )
     .0
+}
+
+/// The paper's 5-move policy through the ORCA filter as deployed.
+fn offline_filtered(setup: Setup, seed: u64, steps: u32, path: &std::path::Path) -> Offline {
+    let safety = Safety::filtered(FilterMargins::DEPLOYED);
+    offline_piloted(setup, seed, steps, path, Outputs::Moves, safety)
+}
+
+/// The bundled target-action policy as robot_node runs it by default and `tending eval`
+/// evaluates it: the chosen box as a straight-line velocity (`plan::targets`) planned and
+/// filtered by its pilot with the deployed margins (40 mm clearance, its make-room).
+fn offline_targets(setup: Setup, seed: u64, steps: u32, path: &std::path::Path) -> Offline {
+    let safety = Safety::filtered(FilterMargins::DEPLOYED);
+    offline_piloted(setup, seed, steps, path, Outputs::Targets, safety)
+}
+
+/// The paper's 5-move policy behind the action shield.
+fn offline_shielded(setup: Setup, seed: u64, steps: u32, path: &std::path::Path) -> Offline {
+    let safety = Safety {
+        shield: true,
+        filter: None,
+    };
+    offline_piloted(setup, seed, steps, path, Outputs::Moves, safety)
+}
+
+/// matching-ORCA (`plan::MatchingOrca`, robot_node's `controller:=matching-orca`): every
+/// robot always asks for the menu's "matched" entry, through the deployed ORCA filter.
+fn offline_matching_orca(setup: Setup, seed: u64, steps: u32) -> (Offline, Env) {
+    let init = |env: &Env| {
+        let fleet = sim::baselines::fleet_params(env.sizes(), env.config());
+        let one = MatchingOrca::new(&fleet, FilterMargins::DEPLOYED).unwrap();
+        (vec![one; env.n_robots()], Vec::new())
+    };
+    offline_episode(setup, seed, steps, init, |(robots, vels), batch, env| {
+        vels.clear();
+        vels.extend(
+            robots
+                .iter_mut()
+                .enumerate()
+                .map(|(r, m)| m.velocity(Row::of(batch, r))),
+        );
+        env.step_velocities(vels).unwrap();
+    })
 }
 
 fn domain(offset: u16) -> u16 {
@@ -198,4 +202,25 @@ fn bundled_target_policy_fleet_in_lockstep_reproduces_the_offline_episode() {
     // No parameters: the default (planner + 40 mm filter) is what is checked.
     let m = fleet_lockstep(setup, seed, steps, domain(3), &env0, Some(&path), &[]);
     assert_same("target policy", &off, &m, steps);
+}
+
+#[test]
+fn matching_orca_fleet_in_lockstep_reproduces_the_offline_episode() {
+    let setup = Setup::new(6, 4, 2);
+    let (seed, steps) = (4, 200);
+    let (off, env0) = offline_matching_orca(setup, seed, steps);
+    assert!(
+        off.delivered > 0,
+        "choose a seed where matching-orca delivers"
+    );
+    let m = fleet_lockstep(
+        setup,
+        seed,
+        steps,
+        domain(4),
+        &env0,
+        None,
+        &["controller:=matching-orca"],
+    );
+    assert_same("matching-orca", &off, &m, steps);
 }

@@ -1,13 +1,14 @@
 //! Greedy-ORCA against plain greedy: same allocation, ORCA avoidance instead of greedy's
 //! axis moves. It must deliver at least as many parts with far fewer contacts.
 
-use sim::baselines::{greedy_action, greedy_params, orca_params, GreedyOrcaFleet};
+use plan::greedy::greedy_action;
+use sim::baselines::{fleet_params, GreedyOrcaFleet};
 use sim::{episode_seed, Env, Metrics, ScenarioConfig, Setup};
 
 fn episode(setup: Setup, seed: u64, orca: bool) -> Metrics {
     let cfg = ScenarioConfig::default();
     let mut env = Env::new(cfg.clone(), setup, seed).unwrap();
-    let gp = greedy_params(env.sizes(), &cfg);
+    let gp = fleet_params(env.sizes(), &cfg).greedy_params();
     let mut fleet = GreedyOrcaFleet::new(&env).unwrap();
     let mut o = obs::ObsBatch::default();
     let (mut acts, mut vels) = (Vec::new(), Vec::new());
@@ -92,7 +93,7 @@ fn orca_parts(setup: &str, make_room_radii: Option<f32>, n: u64) -> u32 {
     (0..n)
         .map(|e| {
             let mut env = Env::new(cfg.clone(), setup, episode_seed(7, 0, e)).unwrap();
-            let mut p = orca_params(env.sizes(), &cfg);
+            let mut p = fleet_params(env.sizes(), &cfg).orca_params();
             if let Some(k) = make_room_radii {
                 p.make_room = k * p.greedy.robot_radius;
             }

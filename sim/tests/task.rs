@@ -311,14 +311,14 @@ fn shipped_default_config_is_the_default() {
     assert_eq!(cfg, ScenarioConfig::default());
 }
 
-/// The planner's machine clock (`obs::machine_clock`), fed only the ready flags a robot
+/// The planner's machine clock (`plan::machine_clock`), fed only the ready flags a robot
 /// observes, knows every machine's timer exactly when it watches from the first step.
 #[test]
 fn machine_clock_from_ready_flags_equals_the_simulators_timers() {
     let cfg = ScenarioConfig::default();
     let mut env = Env::new(cfg, "6.4_2".parse::<Setup>().unwrap(), 3).unwrap();
     let mut fleet = sim::baselines::GreedyOrcaFleet::new(&env).unwrap();
-    let mut clock = obs::machine_clock::MachineClock::new(env.config().task.prep_steps);
+    let mut clock = plan::machine_clock::MachineClock::new(env.config().task.prep_steps);
     let mut batch = obs::ObsBatch::default();
     let mut cmds = Vec::new();
     let mut busy_seen = 0;

@@ -57,18 +57,18 @@ pub struct TrainConfig {
     pub mappo_max_storages: usize,
     /// Save checkpoints every this many updates (and at the end / on Ctrl-C).
     pub save_every: usize,
-    /// Sample rollout actions behind the one-step action shield (`obs::shield`, the one
+    /// Sample rollout actions behind the one-step action shield (`plan::shield`, the one
     /// `tending eval --shield` and robot_node `shield:=true` use) and score them under the
     /// same masked distribution in the update. Off by default (the paper's training).
     pub shield: bool,
     /// Pass every rollout action, as a velocity, through the ORCA safety filter
-    /// (`obs::orca::GreedyOrca::filter`, the code `tending eval --orca-filter` and
+    /// (`plan::orca::GreedyOrca::filter`, the code `tending eval --orca-filter` and
     /// robot_node `orca_filter:=true` run) before the simulator steps: the policy learns
     /// with the filter as part of its world. PPO still scores the discrete action.
     pub orca_filter: bool,
-    /// Peer clearance of that filter at full speed, m (`obs::orca::FILTER_CLEARANCE`; runs
+    /// Peer clearance of that filter at full speed, m (`plan::orca::FILTER_CLEARANCE`; runs
     /// before it existed used greedy-ORCA's 0.025); at rest the smaller of this and
-    /// `obs::orca::FILTER_REST_CLEARANCE` (ADR 0017, 0019: 35 mm until 0019; runs before 0017 kept it fixed).
+    /// `plan::orca::FILTER_REST_CLEARANCE` (ADR 0017, 0019: 35 mm until 0019; runs before 0017 kept it fixed).
     pub orca_filter_clearance: f32,
     /// Constrained PPO (PPO-Lagrangian, Ray et al. 2019, as reward shaping): hold the
     /// contact rate (bodies touched per robot-step, all kinds) at this budget with a
@@ -86,10 +86,10 @@ pub struct TrainConfig {
     /// with a fresh critic, whose first advantages would be noise.
     pub critic_warmup_updates: usize,
     /// 9 actions instead of the paper's 5: the 4 diagonals at the same speed
-    /// (`obs::action`). Axis moves only make a robot travel |dx| + |dy|, 1.27x the straight
+    /// (`plan::action`). Axis moves only make a robot travel |dx| + |dy|, 1.27x the straight
     /// distance on average, which the continuous-velocity baseline does not pay.
     pub diagonal_actions: bool,
-    /// Target actions (`obs::targets`) instead of velocity moves: the policy picks which
+    /// Target actions (`plan::targets`) instead of velocity moves: the policy picks which
     /// box to drive to from a fixed menu, the robot drives there straight; rollouts step
     /// the simulator with that velocity (through the ORCA filter when `orca_filter`).
     pub target_actions: bool,
@@ -126,7 +126,7 @@ impl Default for TrainConfig {
             save_every: 5,
             shield: false,
             orca_filter: false,
-            orca_filter_clearance: obs::orca::FILTER_CLEARANCE,
+            orca_filter_clearance: plan::orca::FILTER_CLEARANCE,
             collision_budget: None,
             lagrange_lr: 2.0,
             lagrange_init: 0.0,

@@ -1,87 +1,108 @@
 //! Evaluation episodes: a learned actor or a scripted baseline through one code path.
+//!
+//! A learned actor drives through `plan`'s pilot (shield, target planner, ORCA filter as
+//! its [`Safety`] says), the same one the trainer's rollouts and robot_node use;
+//! matching-ORCA is that pilot always asking for the menu's "matched" entry.
 
 use super::trainer::TrainError;
 use crate::nn::categorical;
 use crate::Actor;
+use obs::ObsBatch;
+use plan::greedy::{greedy_action, GreedyParams};
+use plan::orca::{GREEDY_ORCA_CLEARANCE, OBSTACLE_HORIZON};
+use plan::pilot::{self, FilterMargins, MatchingOrca, Outputs, Pilot, Row, Safety};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use rayon::prelude::*;
-use sim::baselines::{
-    greedy_action, greedy_params, random_action, shield_logits, shield_params, GreedyOrcaFleet,
-};
-use sim::{action_to_velocity, episode_seed, Env, Metrics, ScenarioConfig, Setup};
+use sim::baselines::{fleet_params, random_action, GreedyOrcaFleet};
+use sim::{episode_seed, Env, Metrics, ScenarioConfig, Setup};
 
 /// Who picks the actions.
 #[derive(Debug, Clone)]
 pub enum Controller {
-    /// A trained actor; argmax actions unless `sample`.
+    /// A trained actor (argmax actions unless `sample`) through its pilot, behind the
+    /// one-step action shield, the ORCA filter or neither (`safety`).
     Learned {
         actor: Box<Actor>,
         sample: bool,
-    },
-    /// The learned actor behind the one-step action shield (`obs::shield`).
-    Shielded {
-        actor: Box<Actor>,
-        sample: bool,
-    },
-    /// The learned actor's action, as a velocity, through ORCA as a safety filter
-    /// (`obs::orca::GreedyOrca::filter`): continuous velocities.
-    Filtered {
-        actor: Box<Actor>,
-        sample: bool,
-        /// ORCA peer clearance at full speed, m (`obs::orca::FILTER_CLEARANCE` by default).
-        clearance: f32,
-        /// ORCA peer clearance at rest, m, at most `clearance`
-        /// (`obs::orca::FILTER_REST_CLEARANCE` by default).
-        rest_clearance: f32,
-        /// ORCA horizon for boxes and walls, s (`obs::orca::FILTER_OBSTACLE_HORIZON` by
-        /// default).
-        obstacle_horizon: f32,
+        safety: Safety,
     },
     Greedy,
-    /// Greedy task allocation + ORCA avoidance (`obs::orca`), continuous velocities.
+    /// Greedy task allocation + ORCA avoidance (`plan::orca`), continuous velocities.
     GreedyOrca {
-        /// Peer clearance, m (`obs::orca::GREEDY_ORCA_CLEARANCE` by default).
+        /// Peer clearance, m (`plan::orca::GREEDY_ORCA_CLEARANCE` by default).
         clearance: f32,
-        /// Horizon for boxes and walls, s (`obs::orca::OBSTACLE_HORIZON` by default).
+        /// Horizon for boxes and walls, s (`plan::orca::OBSTACLE_HORIZON` by default).
         obstacle_horizon: f32,
+    },
+    /// matching-ORCA (docs/adr/0020): every robot always asks the target menu for its
+    /// "matched" entry, through the pilot behind the ORCA filter with these margins.
+    MatchingOrca {
+        margins: FilterMargins,
     },
     Random,
 }
 
 impl Controller {
     /// Greedy-ORCA at its own clearance and obstacle horizon
-    /// (`obs::orca::GREEDY_ORCA_CLEARANCE`, `obs::orca::OBSTACLE_HORIZON`).
+    /// (`plan::orca::GREEDY_ORCA_CLEARANCE`, `plan::orca::OBSTACLE_HORIZON`).
     pub fn greedy_orca() -> Self {
         Controller::GreedyOrca {
-            clearance: obs::orca::GREEDY_ORCA_CLEARANCE,
-            obstacle_horizon: obs::orca::OBSTACLE_HORIZON,
+            clearance: GREEDY_ORCA_CLEARANCE,
+            obstacle_horizon: OBSTACLE_HORIZON,
+        }
+    }
+
+    /// matching-ORCA behind the ORCA filter as it is deployed.
+    pub fn matching_orca() -> Self {
+        Controller::MatchingOrca {
+            margins: FilterMargins::DEPLOYED,
+        }
+    }
+
+    /// `actor` as it is, no safety layer.
+    pub fn learned(actor: Box<Actor>, sample: bool) -> Self {
+        Controller::Learned {
+            actor,
+            sample,
+            safety: Safety::RAW,
+        }
+    }
+
+    /// `actor` behind the one-step action shield (`plan::shield`).
+    pub fn shielded(actor: Box<Actor>, sample: bool) -> Self {
+        Controller::Learned {
+            actor,
+            sample,
+            safety: Safety {
+                shield: true,
+                filter: None,
+            },
+        }
+    }
+
+    /// `actor` behind the ORCA filter as it is deployed ([`FilterMargins::DEPLOYED`]).
+    pub fn filtered(actor: Box<Actor>, sample: bool) -> Self {
+        Controller::Learned {
+            actor,
+            sample,
+            safety: Safety::filtered(FilterMargins::DEPLOYED),
         }
     }
 
     /// What the analysis examples (`menu_use`, `contact_sites`, `machine_waits`) take as
-    /// their first argument: "greedy-orca" for the script, else a checkpoint's actor behind
-    /// the ORCA filter as deployed ([`Self::filtered`], argmax).
+    /// their first argument: "greedy-orca" or "matching-orca" for a script, else a
+    /// checkpoint's actor behind the ORCA filter as deployed ([`Self::filtered`], argmax).
     pub fn script_or_filtered_checkpoint(
         arg: &str,
     ) -> Result<Self, crate::checkpoint::CheckpointError> {
-        if arg == "greedy-orca" {
-            return Ok(Self::greedy_orca());
+        match arg {
+            "greedy-orca" => return Ok(Self::greedy_orca()),
+            "matching-orca" => return Ok(Self::matching_orca()),
+            _ => {}
         }
         let pol = crate::Policy::load(arg)?;
         Ok(Self::filtered(Box::new(pol.actor().clone()), false))
-    }
-
-    /// `actor` behind the ORCA filter as it is deployed (`obs::orca::FILTER_CLEARANCE`,
-    /// `obs::orca::FILTER_REST_CLEARANCE`, `obs::orca::FILTER_OBSTACLE_HORIZON`).
-    pub fn filtered(actor: Box<Actor>, sample: bool) -> Self {
-        Controller::Filtered {
-            actor,
-            sample,
-            clearance: obs::orca::FILTER_CLEARANCE,
-            rest_clearance: obs::orca::FILTER_REST_CLEARANCE,
-            obstacle_horizon: obs::orca::FILTER_OBSTACLE_HORIZON,
-        }
     }
 }
 
@@ -115,9 +136,10 @@ pub fn run_episode_watched(
 }
 
 /// [`run_episode_watched`], also showing `on_actions` each step's observation and the
-/// discrete actions chosen on it (greedy and learned controllers; the random controller
-/// observes nothing, so its batch is empty; greedy-ORCA chooses no discrete action and
-/// never calls it). `policy/examples/menu_use.rs` counts menu entries with it.
+/// discrete actions chosen on it (greedy, learned controllers and matching-ORCA, whose
+/// actions are all "matched"; the random controller observes nothing, so its batch is
+/// empty; greedy-ORCA chooses no discrete action and never calls it).
+/// `policy/examples/menu_use.rs` counts menu entries with it.
 pub fn run_episode_hooked(
     ctrl: &Controller,
     cfg: &ScenarioConfig,
@@ -125,137 +147,165 @@ pub fn run_episode_hooked(
     seed: u64,
     episode: u64,
     mut on_step: impl FnMut(&Env),
-    mut on_actions: impl FnMut(&obs::ObsBatch, &[u8]),
+    mut on_actions: impl FnMut(&ObsBatch, &[u8]),
 ) -> Result<Metrics, TrainError> {
     let mut env = Env::new(cfg.clone(), setup, eval_env_seed(seed, episode))?;
     let mut rng = ChaCha8Rng::seed_from_u64(episode_seed(seed ^ 0x0005_EED0_FAC7, 1, episode));
-    let n = env.n_robots();
-    let params = greedy_params(env.sizes(), cfg);
-    let mut actor = match ctrl {
-        Controller::Learned { actor, .. }
-        | Controller::Shielded { actor, .. }
-        | Controller::Filtered { actor, .. } => Some(actor.as_ref().clone()),
-        _ => None,
-    };
-    let shield = shield_params(env.sizes(), cfg);
-    // Target actions (`obs::targets`) are velocities only through the planner.
-    let targets = actor
-        .as_ref()
-        .is_some_and(|a| a.arch.actions == crate::ActionSpace::Targets);
-    if targets && matches!(ctrl, Controller::Shielded { .. }) {
-        return Err(TrainError::Config(
-            "the action shield acts on velocity moves; this policy has target actions".into(),
-        ));
-    }
-    let mut orca = match ctrl {
-        Controller::GreedyOrca {
-            clearance,
-            obstacle_horizon,
-        } => Some(GreedyOrcaFleet::with_margins(
-            &env,
-            *clearance,
-            *obstacle_horizon,
-        )?),
-        Controller::Filtered {
-            clearance,
-            rest_clearance,
-            obstacle_horizon,
-            ..
-        } => Some(GreedyOrcaFleet::new_filter_with(
-            &env,
-            *clearance,
-            *rest_clearance,
-            *obstacle_horizon,
-        )?),
-        // Without the filter a target policy still plans with the policy's parameters.
-        Controller::Learned { .. } if targets => Some(GreedyOrcaFleet::new_filter(&env, None)?),
-        _ => None,
-    };
-    let mut vels = Vec::with_capacity(n);
-    let mut shielded = Vec::new();
-    let mut prefs = Vec::with_capacity(n);
-    let hidden = actor.as_ref().map(|a| a.hidden()).unwrap_or(0);
-    let mut h = vec![0.0f32; n * hidden];
-    let masks = vec![1.0f32; n];
-    let mut obs = obs::ObsBatch::default();
-    let mut actions = vec![0u8; n];
+    let mut driver = Driver::new(ctrl, &env)?;
+    let mut obs = ObsBatch::default();
     while !env.is_done() {
         on_step(&env);
-        match ctrl {
-            Controller::Random => {
-                for a in actions.iter_mut() {
-                    *a = random_action(&mut rng);
-                }
-            }
-            Controller::Greedy => {
-                env.observe(&mut obs);
-                for (r, a) in actions.iter_mut().enumerate() {
-                    *a = greedy_action(
-                        obs.own_row(r),
-                        obs.machines_row(r),
-                        obs.storages_row(r),
-                        obs.peers_row(r),
-                        &params,
-                    );
-                }
-            }
-            Controller::GreedyOrca { .. } => {
-                env.observe(&mut obs);
-                let orca = orca.as_mut().expect("greedy-orca controller has its fleet");
-                orca.act(&obs, &mut vels)?;
-                env.step_velocities(&vels)?;
-                continue;
-            }
-            Controller::Learned { sample, .. }
-            | Controller::Shielded { sample, .. }
-            | Controller::Filtered { sample, .. } => {
-                env.observe(&mut obs);
-                let actor = actor.as_mut().expect("learned controller has an actor");
-                let k = actor.arch.n_actions;
-                let mut logits = actor.forward_step(&obs, &mut h, &masks)?;
-                if matches!(ctrl, Controller::Shielded { .. }) {
-                    shielded.clear();
-                    shielded.extend_from_slice(logits);
-                    shield_logits(&obs, &mut shielded, &shield);
-                    logits = &shielded;
-                }
-                for (r, a) in actions.iter_mut().enumerate() {
-                    let lg = &logits[r * k..(r + 1) * k];
-                    *a = if *sample {
-                        categorical::sample(lg, rng.gen::<f32>())
-                    } else {
-                        categorical::argmax(lg)
-                    } as u8;
-                }
-            }
-        }
-        on_actions(&obs, &actions);
-        if let Some(orca) = orca.as_mut().filter(|_| targets) {
-            orca.target_velocities(&obs, &actions, &mut prefs)?;
-            if matches!(ctrl, Controller::Filtered { .. }) {
-                orca.filter(&obs, &prefs, &mut vels)?;
-                env.step_velocities(&vels)?;
-            } else {
-                env.step_velocities(&prefs)?;
-            }
-            continue;
-        }
-        if let (Controller::Filtered { .. }, Some(orca)) = (ctrl, orca.as_mut()) {
-            let k = cfg.task.k_speed;
-            prefs.clear();
-            prefs.extend(
-                actions
-                    .iter()
-                    .map(|&a| action_to_velocity(a, k).unwrap_or([0.0; 2])),
-            );
-            orca.filter(&obs, &prefs, &mut vels)?;
-            env.step_velocities(&vels)?;
-            continue;
-        }
-        env.step_actions(&actions)?;
+        driver.step(&mut env, &mut obs, &mut rng, &mut on_actions)?;
     }
     on_step(&env);
     Ok(*env.metrics())
+}
+
+/// A learned actor's state during an episode.
+struct ActorRun {
+    actor: Actor,
+    sample: bool,
+    /// GRU states, rows x hidden.
+    h: Vec<f32>,
+    masks: Vec<f32>,
+    /// Scratch: one row's logits behind the shield.
+    shielded: Vec<f32>,
+}
+
+/// Who decides what the pilots drive to.
+enum Decider {
+    Actor(Box<ActorRun>),
+    /// Always this action (matching-ORCA's "matched" entry).
+    Entry(u8),
+}
+
+/// A controller's per-episode state: what it steps the environment with.
+enum Driver {
+    Random,
+    Greedy(GreedyParams),
+    GreedyOrca(GreedyOrcaFleet),
+    Piloted {
+        decider: Decider,
+        pilots: Vec<Pilot>,
+    },
+}
+
+impl Driver {
+    fn new(ctrl: &Controller, env: &Env) -> Result<Self, TrainError> {
+        let fleet = fleet_params(env.sizes(), env.config());
+        let n = env.n_robots();
+        let pilots = |outputs, safety| -> Result<Vec<Pilot>, TrainError> {
+            let one = Pilot::new(&fleet, outputs, safety).map_err(TrainError::Config)?;
+            Ok(vec![one; n])
+        };
+        Ok(match ctrl {
+            Controller::Random => Driver::Random,
+            Controller::Greedy => Driver::Greedy(fleet.greedy_params()),
+            Controller::GreedyOrca {
+                clearance,
+                obstacle_horizon,
+            } => Driver::GreedyOrca(GreedyOrcaFleet::with_margins(
+                env,
+                *clearance,
+                *obstacle_horizon,
+            )?),
+            Controller::MatchingOrca { margins } => Driver::Piloted {
+                decider: Decider::Entry(MatchingOrca::ENTRY as u8),
+                pilots: pilots(Outputs::Targets, Safety::filtered(*margins))?,
+            },
+            Controller::Learned {
+                actor,
+                sample,
+                safety,
+            } => Driver::Piloted {
+                pilots: pilots(actor.arch.actions.outputs(), *safety)?,
+                decider: Decider::Actor(Box::new(ActorRun {
+                    h: vec![0.0; n * actor.hidden()],
+                    masks: vec![1.0; n],
+                    shielded: Vec::with_capacity(actor.arch.n_actions),
+                    actor: actor.as_ref().clone(),
+                    sample: *sample,
+                })),
+            },
+        })
+    }
+
+    /// One control step of `env`.
+    fn step(
+        &mut self,
+        env: &mut Env,
+        obs: &mut ObsBatch,
+        rng: &mut ChaCha8Rng,
+        on_actions: &mut impl FnMut(&ObsBatch, &[u8]),
+    ) -> Result<(), TrainError> {
+        let n = env.n_robots();
+        match self {
+            Driver::Random => {
+                let actions: Vec<u8> = (0..n).map(|_| random_action(rng)).collect();
+                on_actions(obs, &actions);
+                env.step_actions(&actions)?;
+            }
+            Driver::Greedy(params) => {
+                env.observe(obs);
+                let actions: Vec<u8> = (0..n)
+                    .map(|r| {
+                        let row = Row::of(obs, r);
+                        greedy_action(row.own, row.machines, row.storages, row.peers, params)
+                    })
+                    .collect();
+                on_actions(obs, &actions);
+                env.step_actions(&actions)?;
+            }
+            Driver::GreedyOrca(fleet) => {
+                env.observe(obs);
+                let mut vels = Vec::with_capacity(n);
+                fleet.act(obs, &mut vels)?;
+                env.step_velocities(&vels)?;
+            }
+            Driver::Piloted { decider, pilots } => {
+                env.observe(obs);
+                let actions = match decider {
+                    Decider::Entry(a) => vec![*a; n],
+                    Decider::Actor(run) => run.decide(obs, pilots, rng)?,
+                };
+                on_actions(obs, &actions);
+                let mut vels = Vec::with_capacity(n);
+                pilot::commands(pilots, obs, &actions, &mut vels);
+                env.step_velocities(&vels)?;
+            }
+        }
+        Ok(())
+    }
+}
+
+impl ActorRun {
+    /// Every robot's action on `obs`: the actor's logits, masked by each robot's shield
+    /// when its pilot has one, then argmax or a sample (one draw per row, in row order).
+    fn decide(
+        &mut self,
+        obs: &ObsBatch,
+        pilots: &[Pilot],
+        rng: &mut ChaCha8Rng,
+    ) -> Result<Vec<u8>, TrainError> {
+        let k = self.actor.arch.n_actions;
+        let logits = self.actor.forward_step(obs, &mut self.h, &self.masks)?;
+        let mut actions = Vec::with_capacity(obs.rows);
+        for (r, pilot) in pilots.iter().enumerate() {
+            let mut lg = &logits[r * k..(r + 1) * k];
+            if pilot.shielded() {
+                self.shielded.clear();
+                self.shielded.extend_from_slice(lg);
+                pilot.shield_logits(Row::of(obs, r), &mut self.shielded);
+                lg = &self.shielded;
+            }
+            actions.push(if self.sample {
+                categorical::sample(lg, rng.gen::<f32>())
+            } else {
+                categorical::argmax(lg)
+            } as u8);
+        }
+        Ok(actions)
+    }
 }
 
 /// Episodes `0..episodes` of `setup` under `seed`, in parallel; results in episode order

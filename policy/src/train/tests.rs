@@ -1,6 +1,6 @@
 //! Trainer behaviour: exact resume, determinism, learning on an easy setup.
 //!
-//! Over 700 lines on purpose: the 21 tests of the trainer's observable behaviour share
+//! Over 700 lines on purpose: the 24 tests of the trainer's observable behaviour share
 //! one set of small-run fixtures (tiny configs, short episodes), so they stay together
 //! rather than being spread over the trainer's files.
 
@@ -156,10 +156,7 @@ fn short_training_improves_reward() {
     )
     .unwrap();
     let eval = |t: &Trainer| {
-        let ctrl = Controller::Learned {
-            actor: Box::new(t.actor.clone()),
-            sample: true,
-        };
+        let ctrl = Controller::learned(Box::new(t.actor.clone()), true);
         let ms = evaluate(&ctrl, &sc, setup, 1234, 16).unwrap();
         let r = ms.iter().map(|m| m.total_reward).sum::<f64>() / ms.len() as f64;
         let mu = ms.iter().map(|m| m.utilization()).sum::<f64>() / ms.len() as f64;
@@ -188,10 +185,7 @@ fn evaluation_is_deterministic() {
     let r_mu: f64 = r.iter().map(|m| m.utilization()).sum();
     assert!(g_mu > r_mu, "greedy {g_mu} vs random {r_mu}");
     let actor = crate::Actor::new(crate::ArchConfig::smappo(), 3);
-    let ctrl = Controller::Learned {
-        actor: Box::new(actor),
-        sample: false,
-    };
+    let ctrl = Controller::learned(Box::new(actor), false);
     let x = evaluate(&ctrl, &sc, setup, 5, 3).unwrap();
     let y = evaluate(&ctrl, &sc, setup, 5, 3).unwrap();
     assert_eq!(x, y);
@@ -669,7 +663,7 @@ fn critic_warmup_freezes_the_actor_and_init_actor_checks_shapes() {
 /// 8th equals the 5th, so argmax acts as before; anything else still has to match exactly.
 #[test]
 fn init_actor_widens_a_seven_entry_menu() {
-    use obs::targets::{TargetAction, N_TARGET_ACTIONS, N_TARGET_ACTIONS_V1};
+    use plan::targets::{TargetAction, N_TARGET_ACTIONS, N_TARGET_ACTIONS_V1};
     let cfg = TrainConfig {
         target_actions: true,
         orca_filter: true,
@@ -734,14 +728,8 @@ fn diagonal_actions_train_and_evaluate() {
     let mut sc = ScenarioConfig::default();
     sc.world.episode_steps = 40;
     for ctrl in [
-        Controller::Learned {
-            actor: Box::new(pol.actor().clone()),
-            sample: true,
-        },
-        Controller::Shielded {
-            actor: Box::new(pol.actor().clone()),
-            sample: true,
-        },
+        Controller::learned(Box::new(pol.actor().clone()), true),
+        Controller::shielded(Box::new(pol.actor().clone()), true),
     ] {
         let m = run_episode(&ctrl, &sc, Setup::new(16, 4, 2), 0, 0).unwrap();
         assert_eq!(m.steps, 40);
@@ -762,7 +750,7 @@ fn target_actions_contain_greedy_orca() {
         target_greedy_bias: 2.0,
         ..TrainConfig::default()
     });
-    assert_eq!(t.actor.arch.n_actions, obs::targets::N_TARGET_ACTIONS);
+    assert_eq!(t.actor.arch.n_actions, plan::targets::N_TARGET_ACTIONS);
     assert_eq!(t.actor.arch.actions, crate::ActionSpace::Targets);
     let s = t.step().unwrap();
     assert!(s.policy_loss.is_finite(), "{s:?}");
@@ -773,22 +761,26 @@ fn target_actions_contain_greedy_orca() {
     assert_eq!(pol.actor().arch.actions, crate::ActionSpace::Targets);
 
     let mut always_greedy = pol.actor().clone();
-    always_greedy.add_action_bias(obs::targets::TargetAction::Greedy as usize, 1e4);
+    always_greedy.add_action_bias(plan::targets::TargetAction::Greedy as usize, 1e4);
     let mut sc = ScenarioConfig::default();
     sc.world.episode_steps = 60;
     let setup = Setup::new(6, 4, 2);
-    let filtered = Controller::Filtered {
+    let filtered = Controller::Learned {
         actor: Box::new(always_greedy.clone()),
         sample: false,
-        clearance: obs::orca::GREEDY_ORCA_CLEARANCE,
-        rest_clearance: obs::orca::FILTER_REST_CLEARANCE,
-        obstacle_horizon: obs::orca::OBSTACLE_HORIZON,
+        safety: plan::Safety::filtered(plan::FilterMargins {
+            clearance: plan::orca::GREEDY_ORCA_CLEARANCE,
+            rest_clearance: plan::orca::FILTER_REST_CLEARANCE,
+            obstacle_horizon: plan::orca::OBSTACLE_HORIZON,
+        }),
     };
     // greedy-ORCA as `tending eval` runs it, but planning with the policy's parameters.
     let script = |ep: u64| {
         let mut env =
             Env::new(sc.clone(), setup, crate::train::eval::eval_env_seed(0, ep)).unwrap();
-        let p = sim::baselines::orca_params(env.sizes(), &sc).for_policy(None);
+        let p = sim::baselines::fleet_params(env.sizes(), &sc)
+            .orca_params()
+            .for_policy(None);
         let mut fleet = sim::baselines::GreedyOrcaFleet::with_params(&env, p).unwrap();
         let (mut batch, mut vels) = (obs::ObsBatch::default(), Vec::new());
         while !env.is_done() {
@@ -802,16 +794,10 @@ fn target_actions_contain_greedy_orca() {
         let a = run_episode(&filtered, &sc, setup, 0, ep).unwrap();
         assert_eq!(a, script(ep), "episode {ep}");
     }
-    let raw = Controller::Learned {
-        actor: Box::new(always_greedy),
-        sample: false,
-    };
+    let raw = Controller::learned(Box::new(always_greedy), false);
     let m = run_episode(&raw, &sc, setup, 0, 0).unwrap();
     assert!(m.steps == 60 && m.parts_delivered > 0, "{m:?}");
-    let shielded = Controller::Shielded {
-        actor: Box::new(pol.actor().clone()),
-        sample: false,
-    };
+    let shielded = Controller::shielded(Box::new(pol.actor().clone()), false);
     let e = run_episode(&shielded, &sc, setup, 0, 0).unwrap_err();
     assert!(e.to_string().contains("target actions"), "{e}");
     for bad in [
@@ -823,27 +809,51 @@ fn target_actions_contain_greedy_orca() {
     }
 }
 
-/// The "matched" entry's storage rule (`obs::storage_queue`): where two storage areas
-/// serve 40 robots and 40 machines, always asking for "matched" (the bundled
-/// matching-ORCA script) delivers over 1.1x the parts of always asking for "greedy"
-/// (greedy-ORCA's choices behind the same planner and filter), whose carriers all head
-/// for the nearest storage and jam it, with at most half greedy-ORCA's contact steps on
-/// the same episodes. Seed 7 x 20 episodes: 137.7 parts against 111.8 (docs/RESULTS.md
-/// 7.9). The contact bound was "3 per episode" until the grid-path detour (RESULTS 7.12),
-/// which is matching-ORCA's mean over seeds 0-2 x 50 episodes (3.05 before, 3.12 after):
-/// these 8 episodes gave 2.0 before and 4.8 after, against greedy-ORCA's 20.0.
+/// A target-action actor that always asks for one menu entry (an overwhelming output
+/// bias, as `policy/examples/always_entry.rs` writes them).
+fn always_entry(entry: plan::targets::TargetAction) -> Box<crate::Actor> {
+    let mut arch = crate::ArchConfig::smappo();
+    (arch.d_model, arch.heads, arch.hidden) = (8, 2, 8);
+    arch.n_actions = plan::targets::N_TARGET_ACTIONS;
+    arch.actions = crate::ActionSpace::Targets;
+    let mut actor = crate::Actor::new(arch, 0);
+    actor.add_action_bias(entry as usize, 1e4);
+    Box::new(actor)
+}
+
+/// matching-ORCA, the scripted method (`tending eval --policy matching-orca`), is step
+/// for step the target-action policy that always asks for "matched" behind the deployed
+/// ORCA filter (what the checkpoint `policy/pretrained/matching_orca.safetensors` was).
+#[test]
+fn matching_orca_is_the_always_matched_policy() {
+    let always = Controller::filtered(always_entry(plan::targets::TargetAction::Matched), false);
+    let mut sc = ScenarioConfig::default();
+    sc.world.episode_steps = 80;
+    for setup in [Setup::new(6, 4, 2), Setup::new(12, 4, 1)] {
+        for ep in 0..2 {
+            let a = run_episode(&Controller::matching_orca(), &sc, setup, 3, ep).unwrap();
+            assert_eq!(
+                a,
+                run_episode(&always, &sc, setup, 3, ep).unwrap(),
+                "{setup}"
+            );
+        }
+    }
+}
+
+/// The "matched" entry's storage rule (`plan::storage_queue`): where two storage areas
+/// serve 40 robots and 40 machines, always asking for "matched" (matching-ORCA) delivers
+/// over 1.1x the parts of always asking for "greedy" (greedy-ORCA's choices behind the
+/// same planner and filter), whose carriers all head for the nearest storage and jam it,
+/// with at most half greedy-ORCA's contact steps on the same episodes. Seed 7 x 20
+/// episodes: 137.7 parts against 111.8 (docs/RESULTS.md 7.9). The contact bound was "3
+/// per episode" until the grid-path detour (RESULTS 7.12), which is matching-ORCA's mean
+/// over seeds 0-2 x 50 episodes (3.05 before, 3.12 after): these 8 episodes gave 2.0
+/// before and 4.8 after, against greedy-ORCA's 20.0.
 #[test]
 fn matched_storage_queue_unjams_few_storages() {
-    let path = concat!(
-        env!("CARGO_MANIFEST_DIR"),
-        "/pretrained/matching_orca.safetensors"
-    );
-    let pol = crate::Policy::load(path).unwrap();
-    let matched = Controller::filtered(Box::new(pol.actor().clone()), false);
-    let mut greedy = pol.actor().clone();
-    // Outweighs the checkpoint's own bias on "matched".
-    greedy.add_action_bias(obs::targets::TargetAction::Greedy as usize, 1e5);
-    let greedy = Controller::filtered(Box::new(greedy), false);
+    let matched = Controller::matching_orca();
+    let greedy = Controller::filtered(always_entry(plan::targets::TargetAction::Greedy), false);
     let sc = ScenarioConfig::default();
     let setup = Setup::new(40, 40, 2);
     const EPISODES: u64 = 8;

@@ -177,7 +177,7 @@ impl Trainer {
         let mut actor = Actor::new(actor_arch, mix(seed, u64::MAX, 10));
         if cfg.target_actions {
             actor.add_action_bias(
-                obs::targets::TargetAction::Greedy as usize,
+                plan::targets::TargetAction::Greedy as usize,
                 cfg.target_greedy_bias,
             );
         }
@@ -311,10 +311,10 @@ impl Trainer {
             }
         };
         if cfg.diagonal_actions {
-            actor.n_actions = obs::action::N_ACTIONS_WITH_DIAGONALS;
+            actor.n_actions = plan::action::N_ACTIONS_WITH_DIAGONALS;
         }
         if cfg.target_actions {
-            actor.n_actions = obs::targets::N_TARGET_ACTIONS;
+            actor.n_actions = plan::targets::N_TARGET_ACTIONS;
             actor.actions = crate::ActionSpace::Targets;
         }
         Ok((actor, critic))

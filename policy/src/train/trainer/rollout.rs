@@ -6,10 +6,10 @@ use super::super::config::TrainConfig;
 use super::super::gae::gae;
 use super::{mix, TrainError, Trainer};
 use crate::nn::categorical;
-use crate::PolicyError;
-use obs::orca::GreedyOrca;
-use obs::shield::ShieldParams;
+use crate::{ActionSpace, PolicyError};
 use obs::ObsBatch;
+use plan::orca::{FILTER_OBSTACLE_HORIZON, FILTER_REST_CLEARANCE};
+use plan::pilot::{self, FilterMargins, Pilot, Row, Safety};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use sim::{Metrics, ScenarioConfig, Setup, VecEnv};
@@ -80,12 +80,9 @@ impl Trainer {
         let mut lp = vec![0.0f32; self.actor.arch.n_actions];
         let mut acts = vec![0u8; b];
         let mut finished = vec![];
-        let shield = cfg
-            .shield
-            .then(|| sim::baselines::shield_params(venv.envs()[0].sizes(), &self.scenario));
         let mut bias = vec![0.0f32; self.actor.arch.n_actions];
-        let mut filters = velocity_filters(cfg, &self.scenario, &venv, b)?;
-        let mut vels = vec![[0.0f32; 2]; b];
+        let mut pilots = rollout_pilots(cfg, self.actor.arch.actions, &self.scenario, &venv, b)?;
+        let mut vels = Vec::with_capacity(b);
         let lambda = if cfg.collision_budget.is_some() {
             self.lambda
         } else {
@@ -117,7 +114,7 @@ impl Trainer {
             );
             let (mut logits, values) = (ra?, rc?);
             let mut sampler = Sampler {
-                shield: shield.as_ref(),
+                pilots: &pilots,
                 bias: &mut bias,
                 lp: &mut lp,
                 rng: &mut rng,
@@ -125,13 +122,8 @@ impl Trainer {
             sampler.sample(&mut logits, &step_obs, &mut acts, buf);
             buf.actions.extend_from_slice(&acts);
             buf.values.extend_from_slice(&values);
-            if filters.is_empty() {
-                venv.step_actions(&acts)?;
-            } else {
-                let k_speed = self.scenario.task.k_speed;
-                filtered_velocities(cfg, k_speed, &mut filters, &step_obs, &acts, &mut vels);
-                venv.step_velocities(&vels)?;
-            }
+            pilot::commands(&mut pilots, &step_obs, &acts, &mut vels);
+            venv.step_velocities(&vels)?;
             contacts_total += venv.contacts().iter().map(|&c| c as u64).sum::<u64>();
             let start = buf.rewards.len();
             buf.rewards.extend(
@@ -198,10 +190,10 @@ impl Trainer {
     }
 }
 
-/// Action sampling of one rollout step: the shield's logit bias (when on), then one
-/// categorical draw per row.
+/// Action sampling of one rollout step: the shield's logit bias (when the pilots have
+/// it), then one categorical draw per row.
 struct Sampler<'a> {
-    shield: Option<&'a ShieldParams>,
+    pilots: &'a [Pilot],
     /// Scratch: the shield's bias of one row.
     bias: &'a mut [f32],
     /// Scratch: log-probabilities of one row.
@@ -223,16 +215,9 @@ impl Sampler<'_> {
         let k = lp.len();
         for (r, act) in acts.iter_mut().enumerate() {
             let lg = &mut logits[r * k..(r + 1) * k];
-            if let Some(sp) = self.shield {
-                let safe = obs::shield::safe_actions(
-                    step_obs.own_row(r),
-                    step_obs.machines_row(r),
-                    step_obs.storages_row(r),
-                    step_obs.peers_row(r),
-                    sp,
-                );
+            if let Some(safe) = self.pilots[r].safe_moves(Row::of(step_obs, r)) {
                 bias.iter_mut().for_each(|x| *x = 0.0);
-                obs::shield::mask_logits(bias, &safe);
+                plan::shield::mask_logits(bias, &safe);
                 lg.iter_mut().zip(&*bias).for_each(|(l, b)| *l += b);
                 buf.shield.extend_from_slice(bias);
             }
@@ -245,55 +230,30 @@ impl Sampler<'_> {
     }
 }
 
-/// One ORCA filter per robot (it keeps the positions it saw last step); rebuilt per
-/// rollout because every rollout starts fresh episodes. Target actions need the planner
-/// for their velocity even without the filter. Empty when neither is on.
-fn velocity_filters(
+/// One pilot per robot (its planner and filter keep what they saw last step); rebuilt
+/// per rollout because every rollout starts fresh episodes. Behind the shield and/or the
+/// ORCA filter as configured (`shield`, `orca_filter` with `orca_filter_clearance`, the
+/// deployed rest clearance and obstacle horizon); a target-action actor's pilot plans its
+/// velocity even without the filter.
+fn rollout_pilots(
     cfg: &TrainConfig,
+    actions: ActionSpace,
     scenario: &ScenarioConfig,
     venv: &VecEnv,
     b: usize,
-) -> Result<Vec<GreedyOrca>, TrainError> {
-    if cfg.orca_filter || cfg.target_actions {
-        let filter = cfg.orca_filter.then_some(cfg.orca_filter_clearance);
-        let p = sim::baselines::orca_params(venv.envs()[0].sizes(), scenario).for_policy(filter);
-        let one = GreedyOrca::new(p).map_err(|reason| {
-            TrainError::Config(format!("orca_filter: ORCA parameters: {reason}"))
-        })?;
-        Ok(vec![one; b])
-    } else {
-        Ok(Vec::new())
-    }
-}
-
-/// Velocities of one step behind the filters: each robot's preferred velocity (its
-/// target's, or its action's at `k_speed`), through ORCA when the filter is on.
-fn filtered_velocities(
-    cfg: &TrainConfig,
-    k_speed: f32,
-    filters: &mut [GreedyOrca],
-    step_obs: &ObsBatch,
-    acts: &[u8],
-    vels: &mut [[f32; 2]],
-) {
-    for (r, f) in filters.iter_mut().enumerate() {
-        let (own, m, s, p) = (
-            step_obs.own_row(r),
-            step_obs.machines_row(r),
-            step_obs.storages_row(r),
-            step_obs.peers_row(r),
-        );
-        let pref = if cfg.target_actions {
-            f.target_preferred(acts[r], own, m, s, p)
-        } else {
-            sim::action_to_velocity(acts[r], k_speed).unwrap_or([0.0, 0.0])
-        };
-        vels[r] = if cfg.orca_filter {
-            f.filter(own, m, s, p, pref)
-        } else {
-            pref
-        };
-    }
+) -> Result<Vec<Pilot>, TrainError> {
+    let fleet = sim::baselines::fleet_params(venv.envs()[0].sizes(), scenario);
+    let safety = Safety {
+        shield: cfg.shield,
+        filter: cfg.orca_filter.then_some(FilterMargins {
+            clearance: cfg.orca_filter_clearance,
+            rest_clearance: FILTER_REST_CLEARANCE,
+            obstacle_horizon: FILTER_OBSTACLE_HORIZON,
+        }),
+    };
+    let one = Pilot::new(&fleet, actions.outputs(), safety)
+        .map_err(|reason| TrainError::Config(format!("the rollouts' pilot: {reason}")))?;
+    Ok(vec![one; b])
 }
 
 /// Replace each robot's reward r by (1 - w) r + w mean(r of its env) (`team_reward`);

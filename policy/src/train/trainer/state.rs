@@ -61,7 +61,7 @@ impl Trainer {
     /// architecture is exactly this run's.
     ///
     /// One exception: a target-action actor with the older 7-entry menu
-    /// (`obs::targets::N_TARGET_ACTIONS_V1`) in a run with the current menu gets the new
+    /// (`plan::targets::N_TARGET_ACTIONS_V1`) in a run with the current menu gets the new
     /// "matched" entry as a copy of its "nearest busy" output (`Actor::with_copied_output`):
     /// it starts acting exactly as before under argmax, and the fine-tune learns where
     /// matching beats the claim rule (docs/RESULTS.md 7.8).
@@ -69,11 +69,11 @@ impl Trainer {
         let widened;
         let mut actor = actor;
         if actor.arch.actions == crate::ActionSpace::Targets
-            && actor.arch.n_actions == obs::targets::N_TARGET_ACTIONS_V1
-            && self.actor.arch.n_actions == obs::targets::N_TARGET_ACTIONS
+            && actor.arch.n_actions == plan::targets::N_TARGET_ACTIONS_V1
+            && self.actor.arch.n_actions == plan::targets::N_TARGET_ACTIONS
         {
             widened = actor
-                .with_copied_output(obs::targets::TargetAction::NearestBusy as usize)
+                .with_copied_output(plan::targets::TargetAction::NearestBusy as usize)
                 .map_err(TrainError::Config)?;
             actor = &widened;
         }

@@ -17,7 +17,7 @@
 
 use crate::geom::box_distance;
 use crate::greedy::GreedyParams;
-use crate::{PEER_DIM, STORAGE_DIM};
+use obs::{PEER_DIM, STORAGE_DIM};
 
 /// Steps a carrier expects to wait per carrier ahead of it in a storage's queue. Screened
 /// on seed 7 (20 episodes, always-matched script, with the hold below at one robot per

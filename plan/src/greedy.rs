@@ -1,7 +1,8 @@
 //! The scripted greedy baseline, on the observation alone.
 //!
-//! It lives here, next to the observation type, so the simulator (offline episodes) and
-//! `robot_node` (on the robot, built from ROS topics) run one and the same function: an
+//! It lives in the planner, below the simulator and `robot_node`, so the simulator (offline
+//! episodes) and `robot_node` (on the robot, built from ROS topics) run one and the same
+//! function: an
 //! offline greedy episode and a fleet of greedy `robot_node`s on the sim bridge must agree
 //! step for step.
 
@@ -164,4 +165,49 @@ pub fn greedy_action(
         }
     }
     0
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn params() -> GreedyParams {
+        GreedyParams::default()
+    }
+
+    #[test]
+    fn goes_to_ready_machine_then_storage() {
+        let p = params();
+        // Ready machine to the right, a not-ready one closer on the left.
+        let machines = [1.0, 0.0, 1.0, -0.5, 0.0, 0.0];
+        let storages = [0.0, 1.0];
+        assert_eq!(
+            greedy_action(&[0.0, 0.0, 0.0], &machines, &storages, &[], &p),
+            2
+        );
+        // With a part it heads up to the storage.
+        assert_eq!(
+            greedy_action(&[0.0, 0.0, 1.0], &machines, &storages, &[], &p),
+            4
+        );
+    }
+
+    #[test]
+    fn leaves_a_machine_to_a_nearer_peer() {
+        let p = params();
+        let machines = [1.0, 0.0, 1.0, 0.0, -1.0, 1.0];
+        // A part-less peer right next to the first machine.
+        let peers = [0.9, 0.3, 0.0];
+        let a = greedy_action(&[0.0, 0.0, 0.0], &machines, &[0.5, 0.5], &peers, &p);
+        assert_eq!(a, 3, "should go down to the unclaimed machine");
+    }
+
+    #[test]
+    fn sidesteps_a_peer_in_the_way() {
+        let p = params();
+        let machines = [1.0, 0.0, 1.0];
+        let peers = [0.18, 0.0, 1.0]; // blocking to the right, carrying a part
+        let a = greedy_action(&[0.0, 0.0, 0.0], &machines, &[0.5, 0.5], &peers, &p);
+        assert!(a == 3 || a == 4, "got {a}");
+    }
 }
