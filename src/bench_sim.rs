@@ -36,15 +36,13 @@ fn measure_vec(setup: Setup, n_envs: usize, secs: f64) -> Result<f64> {
     let mut obs = obs::ObsBatch::default();
     // warm-up
     for a in pool.iter().take(5) {
-        v.step_actions(a)?;
-        v.observe(&mut obs);
+        v.step_actions_observe(a, &mut obs)?;
     }
     let t0 = Instant::now();
     let mut steps = 0usize;
     while t0.elapsed() < Duration::from_secs_f64(secs) {
         for _ in 0..10 {
-            v.step_actions(&pool[steps % pool.len()])?;
-            v.observe(&mut obs);
+            v.step_actions_observe(&pool[steps % pool.len()], &mut obs)?;
             steps += 1;
         }
     }
@@ -79,11 +77,12 @@ fn measure_split(setup: Setup, secs: f64) -> Result<(f64, f64)> {
 }
 
 pub fn run(a: BenchArgs) -> Result<()> {
-    let threads = rayon::current_num_threads();
+    // batched steps run on sim::fork's threads (the caller and micropool's), not rayon's
+    let threads = sim::fork::threads();
     let mut md = String::new();
     md += "# Simulator throughput (`tending bench-sim`)\n\n";
     md += &format!(
-        "Machine: {} rayon threads ({} cores). Random actions; every step includes all robots' observations and rewards. {:.1} s per cell.\n\n",
+        "Machine: {} threads for batched steps (sim::fork), {} cores. Batched: `VecEnv::step_actions_observe`. Random actions; every step includes all robots' observations and rewards. {:.1} s per cell.\n\n",
         threads,
         std::thread::available_parallelism().map(|n| n.get()).unwrap_or(0),
         a.seconds

@@ -68,8 +68,7 @@ fn main() {
 
     let mut v = VecEnv::new(cfg.clone(), setup, n_envs, 1).expect("VecEnv");
     let forked = rate(secs, |i| {
-        v.step_actions(&pn[i % 64]).expect("step");
-        v.observe(&mut out);
+        v.step_actions_observe(&pn[i % 64], &mut out).expect("step");
     }) * (r * n_envs) as f64;
 
     let rayon_ext = rate(secs, |i| {
@@ -79,6 +78,15 @@ fn main() {
             .for_each(|(e, (env, o))| step_one(env, &pn[i % 64][e * r..(e + 1) * r], o, i));
     }) * (r * n_envs) as f64;
 
+    let empty_mp = 1e6
+        / rate(secs, |_| {
+            micropool::join(|| std::hint::black_box(1), || std::hint::black_box(2));
+        });
+    let empty_ry = 1e6
+        / rate(secs, |_| {
+            rayon::join(|| std::hint::black_box(1), || std::hint::black_box(2));
+        });
+    println!("empty join from outside: micropool {empty_mp:.2} us, rayon {empty_ry:.2} us");
     println!(
         "{setup} x {n_envs} envs, {} threads: 1 env {single:.0} | loop {looped:.0} ({:.2}x) | VecEnv {forked:.0} ({:.2}x) | rayon from outside {rayon_ext:.0} ({:.2}x)",
         sim::fork::threads(),

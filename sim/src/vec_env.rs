@@ -84,14 +84,24 @@ impl VecEnv {
     /// ends are reset with their next episode seed, and their final metrics kept in
     /// `finished()`.
     pub fn step_actions(&mut self, actions: &[u8]) -> Result<(), SimError> {
-        self.step_with(actions, |env, a| env.step_actions(a))
+        self.step_with(actions, None, |env, a| env.step_actions(a))
+    }
+
+    /// [`VecEnv::step_actions`] then [`VecEnv::observe`] in one pass: each env writes its
+    /// observation right after its step (its state still in cache), one fork per call.
+    pub fn step_actions_observe(
+        &mut self,
+        actions: &[u8],
+        out: &mut ObsBatch,
+    ) -> Result<(), SimError> {
+        self.step_with(actions, Some(out), |env, a| env.step_actions(a))
     }
 
     /// Step every env with a velocity command (vx, vy) per robot (env-major): the path a
     /// safety filter's output takes (`Env::step_velocities`). Same resets as
     /// [`VecEnv::step_actions`].
     pub fn step_velocities(&mut self, cmds: &[[f32; 2]]) -> Result<(), SimError> {
-        self.step_with(cmds, |env, c| env.step_velocities(c))
+        self.step_with(cmds, None, |env, c| env.step_velocities(c))
     }
 
     /// Bodies each robot touched in the last step (env-major, robot order): the cost a
@@ -103,6 +113,7 @@ impl VecEnv {
     fn step_with<C: Sync>(
         &mut self,
         cmds: &[C],
+        out: Option<&mut ObsBatch>,
         step: impl Fn(&mut Env, &[C]) -> Result<(), SimError> + Sync,
     ) -> Result<(), SimError> {
         let n = self.robots_per_env();
@@ -113,9 +124,16 @@ impl VecEnv {
             });
         }
         let base = self.base_seed;
+        let (ow, obs) = match out {
+            Some(o) => obs_lanes(o, n, self.envs.len(), self.envs[0].obs_counts()),
+            None => ([0; 4], Default::default()),
+        };
+        let observe = ow != [0; 4];
         let lanes = StepLanes {
             first: 0,
             n,
+            ow,
+            obs,
             envs: &mut self.envs,
             cmds,
             rewards: &mut self.rewards,
@@ -125,6 +143,7 @@ impl VecEnv {
             episode: &mut self.episode,
         };
         for_each_piece(lanes, &|l: StepLanes<C>| {
+            let e = l.envs.len();
             let it = l
                 .envs
                 .iter_mut()
@@ -132,6 +151,9 @@ impl VecEnv {
                 .zip(l.rewards.chunks_mut(n));
             let it = it.zip(l.contacts.chunks_mut(n)).zip(l.done.iter_mut());
             let it = it.zip(l.finished.iter_mut()).zip(l.episode.iter_mut());
+            let [o, mc, sc, pc] = l.obs;
+            let blk = blocks(o, l.ow[0], e).zip(blocks(mc, l.ow[1], e));
+            let mut blk = blk.zip(blocks(sc, l.ow[2], e)).zip(blocks(pc, l.ow[3], e));
             for (i, ((((((env, a), rew), con), done), fin), ep)) in it.enumerate() {
                 step(env, a)?;
                 rew.copy_from_slice(env.rewards());
@@ -145,6 +167,9 @@ impl VecEnv {
                     *ep += 1;
                     env.reset(episode_seed(base, l.first + i, *ep))?;
                 }
+                if let Some((((o, mc), sc), pc)) = blk.next().filter(|_| observe) {
+                    env.observe_into(o, mc, sc, pc);
+                }
             }
             Ok(())
         })
@@ -153,25 +178,11 @@ impl VecEnv {
     /// Every robot's observation, env-major.
     pub fn observe(&self, out: &mut ObsBatch) {
         let n = self.robots_per_env();
-        let counts = self.envs[0].obs_counts();
-        out.resize(n * self.envs.len(), counts);
-        let (m, k, p) = (counts.machines, counts.storages, counts.peers);
-        let ObsBatch {
-            own,
-            machines,
-            storages,
-            peers,
-            ..
-        } = out;
+        let (w, bufs) = obs_lanes(out, n, self.envs.len(), self.envs[0].obs_counts());
         let lanes = ObsLanes {
             envs: &self.envs,
-            w: [
-                n * obs::SELF_DIM,
-                n * m * obs::MACHINE_DIM,
-                n * k * obs::STORAGE_DIM,
-                n * p * obs::PEER_DIM,
-            ],
-            bufs: [own, machines, storages, peers],
+            w,
+            bufs,
         };
         let _ = for_each_piece(lanes, &|l: ObsLanes| {
             let e = l.envs.len();
@@ -184,6 +195,33 @@ impl VecEnv {
             Ok::<(), ()>(())
         });
     }
+}
+
+/// `out` sized for `e` envs of `n` robots, as values per env and the four buffers.
+fn obs_lanes(
+    out: &mut ObsBatch,
+    n: usize,
+    e: usize,
+    counts: obs::Counts,
+) -> ([usize; 4], [&mut [f32]; 4]) {
+    out.resize(n * e, counts);
+    let (m, k, p) = (counts.machines, counts.storages, counts.peers);
+    let ObsBatch {
+        own,
+        machines,
+        storages,
+        peers,
+        ..
+    } = out;
+    (
+        [
+            n * obs::SELF_DIM,
+            n * m * obs::MACHINE_DIM,
+            n * k * obs::STORAGE_DIM,
+            n * p * obs::PEER_DIM,
+        ],
+        [own, machines, storages, peers],
+    )
 }
 
 /// `n` consecutive blocks of `w` values (empty blocks when `w` is 0: a group with no
@@ -202,6 +240,9 @@ struct StepLanes<'a, C> {
     /// Index of `envs[0]` in the whole batch (for episode seeds).
     first: usize,
     n: usize,
+    /// Observation values per env (all 0 when the step does not observe) and buffers.
+    ow: [usize; 4],
+    obs: [&'a mut [f32]; 4],
     envs: &'a mut [Env],
     cmds: &'a [C],
     rewards: &'a mut [f32],
@@ -224,11 +265,16 @@ impl<C: Sync> Split for StepLanes<'_, C> {
         let (d0, d1) = self.done.split_at_mut(mid);
         let (f0, f1) = self.finished.split_at_mut(mid);
         let (p0, p1) = self.episode.split_at_mut(mid);
+        let (ow, [a, b, c, d]) = (self.ow, self.obs);
+        let ((a0, a1), (b0, b1)) = (cut(a, ow[0], mid), cut(b, ow[1], mid));
+        let ((c0_, c1_), (d0_, d1_)) = (cut(c, ow[2], mid), cut(d, ow[3], mid));
         let first = self.first;
         (
             StepLanes {
                 first,
                 n,
+                ow,
+                obs: [a0, b0, c0_, d0_],
                 envs: e0,
                 cmds: c0,
                 rewards: r0,
@@ -240,6 +286,8 @@ impl<C: Sync> Split for StepLanes<'_, C> {
             StepLanes {
                 first: first + mid,
                 n,
+                ow,
+                obs: [a1, b1, c1_, d1_],
                 envs: e1,
                 cmds: c1,
                 rewards: r1,

@@ -78,3 +78,28 @@ fn the_batched_path_equals_envs_stepped_one_by_one() {
         "two episode ends per env: {episode:?}"
     );
 }
+
+#[test]
+fn the_fused_step_and_observation_equal_the_two_calls() {
+    let setup: Setup = "4.2_2".parse().unwrap();
+    let acts = actions(setup.robots * N_ENVS);
+    let mut a = VecEnv::new(ScenarioConfig::default(), setup, N_ENVS, SEED).unwrap();
+    let mut b = VecEnv::new(ScenarioConfig::default(), setup, N_ENVS, SEED).unwrap();
+    let (mut oa, mut ob) = (obs::ObsBatch::default(), obs::ObsBatch::default());
+    let bits = |x: &[f32]| x.iter().map(|f| f.to_bits()).collect::<Vec<_>>();
+    for (t, act) in acts.iter().enumerate() {
+        a.step_actions_observe(act, &mut oa).unwrap();
+        b.step_actions(act).unwrap();
+        b.observe(&mut ob);
+        assert_eq!(bits(a.rewards()), bits(b.rewards()), "step {t}");
+        assert_eq!(a.done(), b.done(), "step {t}");
+        for (x, y) in [
+            (&oa.own, &ob.own),
+            (&oa.machines, &ob.machines),
+            (&oa.storages, &ob.storages),
+            (&oa.peers, &ob.peers),
+        ] {
+            assert_eq!(bits(x), bits(y), "step {t}");
+        }
+    }
+}
