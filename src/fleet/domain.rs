@@ -102,9 +102,10 @@ pub(super) struct Seen {
     pub participants: usize,
 }
 
-/// At most `n` items of a list, and how many more.
-fn some_of(items: &BTreeSet<String>, n: usize) -> String {
-    let shown: Vec<&str> = items.iter().take(n).map(String::as_str).collect();
+/// At most `n` items of a list (those `first` picks, then the others), and how many more.
+fn some_of(items: &BTreeSet<String>, n: usize, first: impl Fn(&str) -> bool) -> String {
+    let (a, b): (Vec<&str>, Vec<&str>) = items.iter().map(String::as_str).partition(|x| first(x));
+    let shown: Vec<&str> = a.into_iter().chain(b).take(n).collect();
     match items.len().saturating_sub(n) {
         0 => shown.join(", "),
         more => format!("{} and {more} more", shown.join(", ")),
@@ -120,10 +121,12 @@ impl Seen {
     pub(super) fn describe(&self) -> String {
         let mut parts = Vec::new();
         if !self.nodes.is_empty() {
-            parts.push(format!("nodes {}", some_of(&self.nodes, 8)));
+            let robots_later = |n: &str| !n.ends_with("/robot_node");
+            parts.push(format!("nodes {}", some_of(&self.nodes, 8, robots_later)));
         }
         if !self.topics.is_empty() {
-            parts.push(format!("writers on {}", some_of(&self.topics, 6)));
+            let cmd_vel = |t: &str| t.ends_with("/cmd_vel");
+            parts.push(format!("writers on {}", some_of(&self.topics, 4, cmd_vel)));
         }
         format!(
             "{} ({} participant{})",
@@ -267,14 +270,16 @@ pub(super) fn claim(
         let (ros, seen) = look(d, security, guard, for_s)?;
         if !seen.busy() {
             if !busy.is_empty() {
+                let list: Vec<String> = busy.iter().map(u16::to_string).collect();
+                let (what, verb) = match list.len() {
+                    1 => ("domain", "is"),
+                    _ => ("domains", "are"),
+                };
                 eprintln!(
                     "fleet: --domain auto: ROS domain {d} is free: this fleet runs on \
-                     ROS_DOMAIN_ID={d} (domains {} are in use); tools that should see it \
+                     ROS_DOMAIN_ID={d} ({what} {} {verb} in use); tools that should see it \
                      need ROS_DOMAIN_ID={d}",
-                    busy.iter()
-                        .map(u16::to_string)
-                        .collect::<Vec<_>>()
-                        .join(", ")
+                    list.join(", ")
                 );
             }
             guard.ros = keep.then_some(ros);

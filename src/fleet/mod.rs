@@ -86,10 +86,12 @@ pub struct FleetArgs {
     pub stale_timeout: f64,
     /// Command timeout (s) of the bridge (`cmd_vel_timeout_s`): a body whose cmd_vel is
     /// older is commanded zero velocity and brakes to a stop, like a base controller's
-    /// command timeout; it is removed at --stale-timeout. Must be below --stale-timeout
-    /// (docs/adr/0031-command-timeout.md). Realtime only; lockstep waits for commands.
-    #[arg(long, default_value_t = 0.5)]
-    pub cmd_vel_timeout: f64,
+    /// command timeout; it is removed at --stale-timeout, which it must stay below.
+    /// Default: 3 control periods (0.3 s at --rate-hz 10), so that a robot whose node died
+    /// stops within a few ticks (docs/adr/0031-command-timeout.md). Realtime only;
+    /// lockstep waits for commands.
+    #[arg(long)]
+    pub cmd_vel_timeout: Option<f64>,
     /// Robots hosted per robot_node process (each keeps its own controller and cmd_vel).
     /// Default: one per robot up to 10 processes per core; a larger fleet runs as 2
     /// processes per core (on 2 cores: 100 robots as 4 processes of 25). With --secure, one

@@ -61,6 +61,11 @@ fn resolve_policy(p: Option<PathBuf>) -> Option<PathBuf> {
     }
 }
 
+/// The fleet's default command timeout in control periods: above the longest gap between
+/// a live robot's commands at the bridge seen under load (0.26 s at 10 Hz), short enough
+/// that a dead robot stops within a few ticks (docs/adr/0031-command-timeout.md).
+pub(super) const CMD_TIMEOUT_PERIODS: f64 = 3.0;
+
 /// `--cmd-vel-timeout` and `--stale-timeout`: a body stops at the first and is removed at
 /// the second, so the first must be shorter (the bridge refuses it too, naming its
 /// parameter; refused here once, with the flags' names).
@@ -71,7 +76,8 @@ fn check_timeouts(cmd_vel: f64, stale: f64) -> Result<()> {
     if !(cmd_vel.is_finite() && cmd_vel > 0.0 && cmd_vel < stale) {
         bail!(
             "--cmd-vel-timeout must be > 0 and below --stale-timeout ({stale} s): a robot's \
-             body stops at the command timeout and is removed at the staleness timeout; got {cmd_vel}"
+             body stops at the command timeout and is removed at the staleness timeout; got \
+             {cmd_vel} (its default is {CMD_TIMEOUT_PERIODS} control periods of --rate-hz)"
         );
     }
     Ok(())
@@ -91,6 +97,9 @@ pub(super) struct Plan {
     pub(super) per_process: usize,
     /// `--secure`: the keystore every child's enclave is in.
     pub(super) keystore: Option<keystore::Keystore>,
+    /// The bridge's `cmd_vel_timeout_s`: `--cmd-vel-timeout`, else
+    /// [`CMD_TIMEOUT_PERIODS`] control periods.
+    pub(super) cmd_vel_timeout: f64,
 }
 
 impl Plan {
@@ -105,7 +114,11 @@ impl Plan {
         if !(a.duration.is_finite() && a.duration > 0.0) {
             bail!("--duration must be > 0");
         }
-        check_timeouts(a.cmd_vel_timeout, a.stale_timeout)?;
+        if !(a.rate_hz.is_finite() && a.rate_hz > 0.0) {
+            bail!("--rate-hz must be a number > 0");
+        }
+        let cmd_vel_timeout = a.cmd_vel_timeout.unwrap_or(CMD_TIMEOUT_PERIODS / a.rate_hz);
+        check_timeouts(cmd_vel_timeout, a.stale_timeout)?;
         if a.robots_per_process == Some(0) {
             bail!("--robots-per-process must be at least 1");
         }
@@ -168,6 +181,7 @@ impl Plan {
             bridge_bin,
             per_process,
             keystore,
+            cmd_vel_timeout,
         })
     }
 
@@ -303,7 +317,10 @@ impl Plan {
             .args(["-p", &format!("mode:={}", a.mode)])
             .args(["-p", &format!("rate_hz:={}", a.rate_hz)])
             .args(["-p", &format!("stale_timeout_s:={:?}", a.stale_timeout)])
-            .args(["-p", &format!("cmd_vel_timeout_s:={:?}", a.cmd_vel_timeout)])
+            .args([
+                "-p",
+                &format!("cmd_vel_timeout_s:={:?}", self.cmd_vel_timeout),
+            ])
             .args(["-p", "stdin_commands:=true"])
             .stdin(Stdio::piped())
             .stdout(Stdio::piped())
