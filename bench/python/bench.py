@@ -160,7 +160,7 @@ def main():
         "- `parallel_env`: the full PettingZoo step: an action dict in; dicts of per-agent "
         "observations (views into the batch arrays), rewards, terminations, truncations and "
         "infos out. Per-agent Python objects dominate its cost.",
-        "- `vector_env`: N envs stepped on rayon with the GIL released, numpy arrays in and out, "
+        "- `vector_env`: N envs stepped one run of envs per thread (sim::fork, ADR 0033) with the GIL released, numpy arrays in and out, "
         "no per-agent Python objects.",
         "",
     ]
