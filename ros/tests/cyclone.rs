@@ -118,8 +118,7 @@ fn cyclone_peer() -> PathBuf {
 }
 
 fn keystore(name: &str) -> (PathBuf, Keystore) {
-    let root =
-        std::env::temp_dir().join(format!("tending-cyclone-{name}-{}", std::process::id()));
+    let root = std::env::temp_dir().join(format!("tending-cyclone-{name}-{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&root);
     let ks = Keystore::create(&root).unwrap();
     ks.create_fleet_enclaves(
@@ -230,10 +229,18 @@ struct PeerRun<'a> {
 /// on the returned channel.
 fn spawn_peer(run: PeerRun) -> mpsc::Receiver<PeerResult> {
     let mut cmd = Command::new(cyclone_peer());
-    let (pose, cmd_vel) = (format!("rt/{}/pose", run.robot), format!("rt/{}/cmd_vel", run.robot));
+    let (pose, cmd_vel) = (
+        format!("rt/{}/pose", run.robot),
+        format!("rt/{}/cmd_vel", run.robot),
+    );
     cmd.args(["--domain", &run.domain.to_string()])
         .args(["--read", &pose, "--write", &cmd_vel])
-        .args(["--vx", &run.vx.to_string(), "--seconds", &run.secs.to_string()]);
+        .args([
+            "--vx",
+            &run.vx.to_string(),
+            "--seconds",
+            &run.secs.to_string(),
+        ]);
     if let Some(n) = run.until {
         cmd.args(["--until", &n.to_string()]);
     }
@@ -297,8 +304,7 @@ fn bridge_with_peer(
     mut also: impl FnMut(),
 ) -> (PeerResult, BridgeSide) {
     let pose_pub =
-        publisher::<PoseStamped>(bridge, &format!("/{robot}/pose"), Profile::RobotStream)
-            .unwrap();
+        publisher::<PoseStamped>(bridge, &format!("/{robot}/pose"), Profile::RobotStream).unwrap();
     let cmd_sub =
         subscription::<Twist>(bridge, &format!("/{robot}/cmd_vel"), Profile::RobotStream).unwrap();
     let mut cmds = Vec::new();
@@ -306,7 +312,11 @@ fn bridge_with_peer(
     let mut big = pose(1.5);
     big.header.frame_id = "f".repeat(3000);
     for tick in 0.. {
-        let _ = pose_pub.publish(if tick % 2 == 1 { big.clone() } else { pose(1.5) });
+        let _ = pose_pub.publish(if tick % 2 == 1 {
+            big.clone()
+        } else {
+            pose(1.5)
+        });
         also();
         std::thread::sleep(Duration::from_millis(50));
         while let Ok(Some((m, _))) = cmd_sub.take() {
@@ -349,9 +359,18 @@ fn cyclone_robot_talks_to_the_bridge(name: &str, d: u16, robot: &str) {
         read2: None,
     });
     let (r, b) = bridge_with_peer(&mut bridge, robot, peer, || ());
-    assert!(r.refused.is_none(), "Cyclone refused our enclave:\n{}", r.log);
+    assert!(
+        r.refused.is_none(),
+        "Cyclone refused our enclave:\n{}",
+        r.log
+    );
     assert!(r.read >= 20, "Cyclone read {} poses:\n{}", r.read, r.log);
-    assert!(r.big >= 5, "Cyclone read {} fragmented poses:\n{}", r.big, r.log);
+    assert!(
+        r.big >= 5,
+        "Cyclone read {} fragmented poses:\n{}",
+        r.big,
+        r.log
+    );
     assert_eq!(r.last_x, 1.5, "Cyclone read a wrong pose");
     assert!(
         b.cmds.len() >= 10,
@@ -395,7 +414,8 @@ fn an_unauthenticated_cyclone_participant_reads_nothing_and_commands_nobody() {
     let (_oc, mut open) = participant(d, &Security::Off, "open");
     let robot_pose =
         subscription::<PoseStamped>(&mut robot, "/robot_0/pose", Profile::RobotStream).unwrap();
-    let robot_cmd = publisher::<Twist>(&mut robot, "/robot_0/cmd_vel", Profile::RobotStream).unwrap();
+    let robot_cmd =
+        publisher::<Twist>(&mut robot, "/robot_0/cmd_vel", Profile::RobotStream).unwrap();
     let open_pub =
         publisher::<PoseStamped>(&mut open, "/robot_9/pose", Profile::RobotStream).unwrap();
     let mut robot_got = 0;
@@ -416,13 +436,20 @@ fn an_unauthenticated_cyclone_participant_reads_nothing_and_commands_nobody() {
         }
     });
     assert!(r.refused.is_none(), "{}", r.log);
-    assert!(r.read2 > 0, "control: Cyclone read no unsecured poses either:\n{}", r.log);
+    assert!(
+        r.read2 > 0,
+        "control: Cyclone read no unsecured poses either:\n{}",
+        r.log
+    );
     assert!(robot_got > 0, "control: robot_0 (secure) read no poses");
     assert!(
-        b.cmds.iter().any(|&x| x == 0.1),
+        b.cmds.contains(&0.1),
         "control: no command of robot_0 reached the bridge"
     );
-    assert_eq!(r.read, 0, "an unauthenticated Cyclone participant read poses");
+    assert_eq!(
+        r.read, 0,
+        "an unauthenticated Cyclone participant read poses"
+    );
     assert_eq!(r.matched_sub + r.matched_pub, 0, "it was matched: {r:?}");
     assert!(
         !b.cmds.contains(&-9.0),
@@ -449,7 +476,8 @@ fn a_cyclone_peer_with_another_cas_certificate_is_refused_both_ways() {
     let mut recorder_got = 0;
     let robot_pose =
         subscription::<PoseStamped>(&mut robot, "/robot_0/pose", Profile::RobotStream).unwrap();
-    let robot_cmd = publisher::<Twist>(&mut robot, "/robot_0/cmd_vel", Profile::RobotStream).unwrap();
+    let robot_cmd =
+        publisher::<Twist>(&mut robot, "/robot_0/cmd_vel", Profile::RobotStream).unwrap();
     let mut robot_got = 0;
     let dir = other.enclave_dir("/tending/robot_0");
     let peer = spawn_peer(PeerRun {
@@ -474,7 +502,7 @@ fn a_cyclone_peer_with_another_cas_certificate_is_refused_both_ways() {
     assert!(robot_got > 0, "control: robot_0 read no poses");
     assert!(recorder_got > 0, "control: the recorder read no poses");
     assert!(
-        b.cmds.iter().any(|&x| x == 0.1),
+        b.cmds.contains(&0.1),
         "control: no command of robot_0 reached the bridge"
     );
     assert_eq!(r.read, 0, "a Cyclone peer of another CA read poses");
@@ -490,7 +518,11 @@ fn a_cyclone_peer_with_another_cas_certificate_is_refused_both_ways() {
         r.guid,
         r.log
     );
-    eprintln!("our side refused it {} times, e.g.: {}", ours.len(), ours[0]);
+    eprintln!(
+        "our side refused it {} times, e.g.: {}",
+        ours.len(),
+        ours[0]
+    );
     // Cyclone's side: it refused our bridge's certificate.
     let theirs: Vec<&str> = r
         .cyclone_log
