@@ -5,7 +5,8 @@
 //!   command, despawn when stale, lockstep bookkeeping, `/tending/command`, metrics,
 //!   markers;
 //! - [`delay`]: the fault-injection hold of `test_cmd_delay_ms` / `test_state_delay_ms`;
-//! - [`node`]: the ros2-client node (per-entity publishers, cmd_vel discovery, step loop);
+//! - [`node`]: the ros2-client node (cmd_vel discovery, step loop);
+//! - `outputs`: what the node publishes (state frames, per-entity writers, the recorder);
 //! - [`watchdog`]: the stages the start-up/stall watchdog names (exit code 75).
 //!
 //! Run-time commands on `/tending/command` (std_msgs/String): `add_machine [x y]`,
@@ -18,5 +19,6 @@
 pub mod core;
 pub mod delay;
 pub mod node;
+mod outputs;
 pub mod params;
 pub mod watchdog;
