@@ -2,7 +2,7 @@
 
     python3 bench/faults/report.py REPORT.jsonl [DOC.md [OUTDIR]]
 
-Each section the report has data for (restart, hostile, netns) is rendered as markdown.
+Each section the report has data for (restart, hostile, netns, kill) is rendered as markdown.
 In DOC, the text between `<!-- begin generated: KEY -->` and `<!-- end generated: KEY -->`
 is replaced by it; everything else in DOC (hand-written readings) stays. A section whose
 block DOC lacks is written to OUTDIR/KEY.md (default bench/faults/out) and named on stderr.
@@ -48,6 +48,29 @@ def hostile_md(r):
     p("\n| process | RSS before [kB] | RSS after [kB] |\n|---|---|---|")
     for (n, b), (_, a) in zip(r["rss_kb_before"], r["rss_kb_after"]):
         p(f"| {n} | {b} | {a} |")
+    return "\n".join(o)
+
+
+def kill_md(rows):
+    """A robot SIGKILLed in a realtime 6.4_2 fleet (tests/faults/kill.rs), per command timeout."""
+    o = []
+    p = o.append
+    p("| bridge | kills | kills with contacts | contact steps of the killed robot (runs with any) | "
+      "travel after the kill [m] | moved from 0.7-0.9 s after the kill to its removal [m] | removed after [s] | "
+      "live robots' longest cmd_vel gap [s] |")
+    p("|---|---|---|---|---|---|---|---|")
+    groups = {}
+    for r in rows:
+        groups.setdefault(r.get("bridge") or f"cmd_vel_timeout_s {r.get('cmd_vel_timeout_s')}", []).append(r)
+    for label, rs in groups.items():
+        touched = [r["killed_robot_contact_steps"] for r in rs if r["killed_robot_contact_steps"] > 0]
+        trav = [r["travelled_after_kill_m"] for r in rs]
+        late = [r["moved_after_stop_m"] for r in rs]
+        gone = [r["last_pose_after_kill_s"] for r in rs]
+        gaps = [r["cmd_gaps_of_live_robots"]["max_s"] for r in rs if r.get("cmd_gaps_of_live_robots")]
+        p(f"| {label} | {len(rs)} | {len(touched)} | {', '.join(map(str, touched)) or '-'} | "
+          f"{min(trav):.2f}-{max(trav):.2f} | {max(late):.3f} | {min(gone):.2f}-{max(gone):.2f} | "
+          f"{f'{max(gaps):.2f}' if gaps else '-'} |")
     return "\n".join(o)
 
 
@@ -207,6 +230,9 @@ def main():
             sections["restart"] = restart_md(r)
         elif r["fault"] == "hostile publisher":
             sections["hostile"] = hostile_md(r)
+    kills = [r for r in rows if r["fault"] == "robot SIGKILLed in a realtime fleet"]
+    if kills:
+        sections["kill"] = kill_md(kills)
     netns = [r for r in rows if r["fault"] == "netns"]
     if netns:
         sections["netns"] = netns_md(netns)

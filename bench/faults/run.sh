@@ -3,7 +3,11 @@
 # more cases, collects their REPORT lines (bench/faults/out/report.jsonl) and lets
 # bench/faults/report.py write the figures.
 #
-#   bench/faults/run.sh [netns] [restart] [hostile]     (default: all three)
+#   bench/faults/run.sh [netns] [restart] [hostile] [kill]     (default: all four)
+#
+# kill (section (d)): `kill robot_1` in a realtime 6.4_2 `tending fleet`, once per SEED:AT
+# of TENDING_KILL_CASES (AT = seconds after the start; 10 cases, ~25 s each), with the
+# fleet's default command timeout unless TENDING_KILL_CMD_TIMEOUT_S is set.
 #
 # netns (section (b)): cases clean, loss10, loss30, delay50, delay200 (delay both ways:
 # sim_bridge's test_cmd_delay_ms and test_state_delay_ms), TENDING_NETNS_S seconds each
@@ -20,7 +24,7 @@
 set -euo pipefail
 cd "$(dirname "$0")/../.."
 sel=("$@")
-[ ${#sel[@]} -eq 0 ] && sel=(netns restart hostile)
+[ ${#sel[@]} -eq 0 ] && sel=(netns restart hostile kill)
 out="bench/faults/out"; mkdir -p "$out"
 rep="$out/report.jsonl"; : > "$rep"
 export TENDING_FAULTS_REPORT="$PWD/$rep"
@@ -33,8 +37,8 @@ for s in "${sel[@]}"; do
             [ "$(id -u)" -eq 0 ] || { echo "netns needs root (ip netns, veth, iptables)" >&2; exit 1; }
             command -v iptables >/dev/null || { echo "iptables missing: apt-get install -y iptables" >&2; exit 1; }
             ;;
-        restart|hostile) ;;
-        *) echo "unknown selection $s (netns|restart|hostile)" >&2; exit 2 ;;
+        restart|hostile|kill) ;;
+        *) echo "unknown selection $s (netns|restart|hostile|kill)" >&2; exit 2 ;;
     esac
 done
 nice -n 19 cargo build --release -p tending --bin tending
@@ -47,6 +51,16 @@ for s in "${sel[@]}"; do
             echo "netns: $n runs of $TENDING_NETNS_S s (cases $TENDING_NETNS_CASES; seeds $TENDING_NETNS_SEEDS)" ;;
         restart) t=faults_bridge_restart ;;
         hostile) t=faults_hostile ;;
+        kill)
+            cases="${TENDING_KILL_CASES:-0:12,1:8,1:14,2:11,2:20,3:9,4:13,4:19,5:16,5:23}"
+            echo "== faults_kill ($(( $(date +%s) - start )) s): cases $cases"
+            : > "$out/faults_kill.log"
+            for c in ${cases//,/ }; do
+                TENDING_KILL_SEED="${c%%:*}" TENDING_KILL_AT_S="${c##*:}" \
+                    nice -n 19 cargo test --release -p sim-bridge --test faults_kill -- --nocapture 2>&1 \
+                    | tee -a "$out/faults_kill.log" | grep --line-buffered -E "killed .* after the start|^test result|panicked" || true
+            done
+            continue ;;
     esac
     echo "== $t ($(( $(date +%s) - start )) s)"
     nice -n 19 cargo test --release -p sim-bridge --test "$t" -- --nocapture 2>&1 \
