@@ -24,7 +24,7 @@ use pyo3::prelude::*;
 use pyo3::types::PyDict;
 use rayon::prelude::*;
 use sim::episode_seed;
-use sim::fork::{for_each_piece, Split};
+use sim::fork::{blocks, cut, for_each_piece, Split};
 use sim::Env;
 
 /// `n_envs` environments of one setup stepped together on rayon, the GIL released. Each
@@ -90,22 +90,6 @@ impl Split for Lanes<'_> {
             },
         )
     }
-}
-
-/// A buffer of `w` values per env cut at env `mid`.
-fn cut(b: &mut [f32], w: usize, mid: usize) -> (&mut [f32], &mut [f32]) {
-    b.split_at_mut((w * mid).min(b.len()))
-}
-
-/// `n` consecutive blocks of `w` values (empty ones when `w` is 0: a group with no
-/// entities, e.g. the peers of a 1-robot setup, where `chunks_mut` would panic).
-fn blocks(b: &mut [f32], w: usize, n: usize) -> impl Iterator<Item = &mut [f32]> {
-    let mut rest = b;
-    (0..n).map(move |_| {
-        let (head, tail) = std::mem::take(&mut rest).split_at_mut(w);
-        rest = tail;
-        head
-    })
 }
 
 impl Lanes<'_> {

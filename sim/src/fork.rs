@@ -59,8 +59,19 @@ fn split_run<W: Split, E: Send>(
 
 /// Cut a slice of `w` values per env at env `mid` (an empty slice stays empty: a group
 /// with no entities has width 0).
-pub(crate) fn cut<T>(s: &mut [T], w: usize, mid: usize) -> (&mut [T], &mut [T]) {
+pub fn cut<T>(s: &mut [T], w: usize, mid: usize) -> (&mut [T], &mut [T]) {
     s.split_at_mut((w * mid).min(s.len()))
+}
+
+/// `n` consecutive blocks of `w` values (empty blocks when `w` is 0: a group with no
+/// entities, where `chunks_mut` would panic).
+pub fn blocks(b: &mut [f32], w: usize, n: usize) -> impl Iterator<Item = &mut [f32]> {
+    let mut rest = b;
+    (0..n).map(move |_| {
+        let (head, tail) = std::mem::take(&mut rest).split_at_mut(w);
+        rest = tail;
+        head
+    })
 }
 
 #[cfg(test)]

@@ -5,7 +5,7 @@
 //! episode seeds derive from (base seed, env index, episode number) only, so results are
 //! bit-for-bit the same whatever the number of threads.
 
-use crate::fork::{cut, for_each_piece, Split};
+use crate::fork::{blocks, cut, for_each_piece, Split};
 use crate::{Env, Metrics, ScenarioConfig, Setup, SimError};
 use obs::ObsBatch;
 
@@ -222,17 +222,6 @@ fn obs_lanes(
         ],
         [own, machines, storages, peers],
     )
-}
-
-/// `n` consecutive blocks of `w` values (empty blocks when `w` is 0: a group with no
-/// entities, where `chunks_mut` would panic).
-fn blocks(b: &mut [f32], w: usize, n: usize) -> impl Iterator<Item = &mut [f32]> {
-    let mut rest = b;
-    (0..n).map(move |_| {
-        let (head, tail) = std::mem::take(&mut rest).split_at_mut(w);
-        rest = tail;
-        head
-    })
 }
 
 /// A run of envs and their slices of the step's outputs (env-major).
