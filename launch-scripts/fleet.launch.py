@@ -8,7 +8,11 @@ Launch arguments:
     robots         number of robot_node processes; default: N of `setup`
     seed           simulator seed, passed to sim_bridge
     policy         checkpoint (safetensors) for every robot_node; empty: greedy controller
-    controller     `greedy` or `policy`; empty: robot_node decides (policy if a path is given)
+    controller     `greedy`, `greedy-orca`, `matching-orca` or `policy`; empty: robot_node
+                   decides (policy if a path is given)
+    params_file    a ROS 2 parameters file for every node, e.g. the `fleet.yaml` that
+                   `tending fleet` writes (sizes, speeds, timeouts, per-node sections);
+                   the launch arguments above override it
     use_sim_time   robot nodes tick on the bridge's /clock (true) or the wall clock
     bridge         `true` to start sim_bridge (false: robots only, e.g. on hardware)
 
@@ -16,19 +20,23 @@ Robot i runs in namespace /robot_i (robot_node's identity), so its topics are
 /robot_i/pose, /robot_i/has_part, /robot_i/cmd_vel as in the DESIGN.md contract.
 """
 
+import os
+
 from launch import LaunchDescription
 from launch.actions import DeclareLaunchArgument, OpaqueFunction
 from launch.substitutions import LaunchConfiguration
 from launch_ros.actions import Node
 
 PACKAGE = 'tending'
+CONTROLLERS = ('', 'greedy', 'greedy-orca', 'matching-orca', 'policy')
 
 ARGUMENTS = [
     ('setup', '6.4_2', 'scenario N.M_K (agents.machines_storages)'),
     ('robots', '', 'number of robots; empty: N of setup'),
     ('seed', '0', 'simulator seed'),
     ('policy', '', 'policy checkpoint for every robot; empty: greedy controller'),
-    ('controller', '', 'greedy or policy; empty: robot_node default'),
+    ('controller', '', 'greedy, greedy-orca, matching-orca or policy; empty: robot_node default'),
+    ('params_file', '', 'ROS 2 parameters file for every node (tending fleet writes fleet.yaml)'),
     ('use_sim_time', 'true', 'robot nodes follow /clock from sim_bridge'),
     ('bridge', 'true', 'start sim_bridge'),
 ]
@@ -69,8 +77,14 @@ def fleet_actions(values):
     use_sim_time = parse_bool('use_sim_time', values['use_sim_time'])
     policy = values['policy'].strip()
     controller = values['controller'].strip()
-    if controller not in ('', 'greedy', 'policy'):
-        raise ValueError(f'launch argument controller:={controller!r}: expected greedy or policy')
+    if controller not in CONTROLLERS:
+        raise ValueError(f'launch argument controller:={controller!r}: expected one of '
+                         + ', '.join(c for c in CONTROLLERS if c))
+    # the file first: ROS 2 applies `parameters` in order, so the arguments override it
+    params_file = values.get('params_file', '').strip()
+    if params_file and not os.path.isfile(params_file):
+        raise ValueError(f'launch argument params_file:={params_file!r}: no such file')
+    first = [params_file] if params_file else []
 
     actions = []
     if parse_bool('bridge', values['bridge']):
@@ -79,7 +93,7 @@ def fleet_actions(values):
             executable='sim_bridge',
             name='sim_bridge',
             output='screen',
-            parameters=[{'setup': setup, 'seed': seed}],
+            parameters=first + [{'setup': setup, 'seed': seed}],
         ))
     robot_params = {'use_sim_time': use_sim_time}
     if policy:
@@ -93,7 +107,7 @@ def fleet_actions(values):
             name='robot_node',
             namespace=f'robot_{i}',
             output='screen',
-            parameters=[dict(robot_params)],
+            parameters=first + [dict(robot_params)],
         ))
     return actions
 

@@ -100,15 +100,14 @@ greedy() { # name setups: the scripted baselines on the experiment's setups (not
         echo "== eval greedy-orca -> $out ($2)"
         "$T" eval --policy greedy-orca --setups "$2" --episodes "$EVAL_EPISODES" --seeds "$EVAL_SEEDS" --out "$out" >/dev/null
     fi
-    # matching-ORCA and the shipped target-menu policy (trained on 6.4_2 behind the ORCA
-    # filter, evaluated as robot_node runs it): evaluation only, never trained here
-    local name ckpt
-    for name in matching-orca shipped; do
-        ckpt=policy/pretrained/smappo_6.4_2.safetensors
-        [ "$name" = matching-orca ] && ckpt=policy/pretrained/matching_orca.safetensors
-        out="$RUNS/$1/$name/eval"
-        evaluate "$ckpt" "$2" "$out"
-    done
+    out="$RUNS/$1/matching-orca/eval"
+    if ! has_eval "$out/results.csv" "$2"; then
+        echo "== eval matching-orca -> $out ($2)"
+        "$T" eval --policy matching-orca --setups "$2" --episodes "$EVAL_EPISODES" --seeds "$EVAL_SEEDS" --out "$out" >/dev/null
+    fi
+    # the shipped target-menu policy (trained on 6.4_2 behind the ORCA filter, evaluated as
+    # robot_node runs it): evaluation only, never trained here
+    evaluate policy/pretrained/smappo_6.4_2.safetensors "$2" "$RUNS/$1/shipped/eval"
 }
 
 plot_bin() { # a tending that has `plot` (TENDING may be an older copy)

@@ -17,8 +17,8 @@ KEEP = "<!-- Generated above by bench/experiments/table.py; text below this line
 ORDER = ["smappo", "mappo", "greedy", "greedy-orca", "matching-orca", "shipped", "random"]
 # evaluated, never trained here: one evaluation, std over eval seeds
 SCRIPTED = {"greedy", "greedy-orca", "matching-orca", "shipped", "random"}
-# methods whose results.csv `policy` column does not name them (matching-ORCA is a
-# checkpoint, the shipped policy an SMAPPO): named by their directory (run.sh EXTRA=1)
+# methods whose results.csv `policy` column does not name them (the shipped policy is an
+# SMAPPO, greedy-ORCA a greedy): named by their directory (run.sh EXTRA=1)
 BY_DIR = {"greedy-orca", "matching-orca", "shipped"}
 # contact steps by kind (results.csv columns), after parts, collisions and MU
 KINDS = ["collisions_robot_robot", "collisions_robot_machine", "collisions_robot_storage",

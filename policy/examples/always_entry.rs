@@ -2,9 +2,10 @@
 //! as a checkpoint so `tending eval`, `tending fleet` and robot_node run it like any other:
 //! entry 1 is greedy-ORCA with the policy's planner, entry 7 ("matched") the matching-ORCA
 //! script of docs/RESULTS.md 7.8. The scripts a learned menu policy must beat are these.
-//! matching-ORCA itself is a scripted method now (`plan::MatchingOrca`: `tending eval
+//! matching-ORCA itself is a scripted method (`plan::MatchingOrca`: `tending eval
 //! --policy matching-orca`, robot_node `-p controller:=matching-orca`), step for step the
-//! checkpoint this writes for entry 7 (`policy/pretrained/matching_orca.safetensors`).
+//! checkpoint this writes for entry 7 (tested in policy/src/train/tests.rs); this example
+//! stays for the other entries, as ablations.
 //!
 //! cargo run --release -p policy --example always_entry -- ENTRY OUT.safetensors
 

@@ -23,6 +23,7 @@ mod domain;
 mod health;
 mod layout;
 mod live;
+mod params;
 mod plan;
 mod secure;
 
@@ -47,8 +48,8 @@ pub struct FleetArgs {
     /// Run time in seconds: wall time in realtime mode, sim time in lockstep mode.
     #[arg(long, default_value_t = 60.0)]
     pub duration: f64,
-    /// Policy for every robot_node: a checkpoint path, `greedy` or `greedy-orca` for the
-    /// scripted controllers, or (default) the bundled SMAPPO policy
+    /// Policy for every robot_node: a checkpoint path, `greedy`, `greedy-orca` or
+    /// `matching-orca` for the scripted controllers, or (default) the bundled SMAPPO policy
     /// policy/pretrained/smappo_6.4_2.safetensors. A checkpoint runs behind the ORCA
     /// safety filter by default (`--robot-param orca_filter:=false` for the raw policy),
     /// or behind the action shield with `--robot-param shield:=true`.

@@ -12,7 +12,7 @@ use anyhow::{anyhow, bail, Context, Result};
 
 use super::children::{BridgeProc, RobotProc};
 use super::domain::{self, DomainArg, Guard, MAX_DOMAIN};
-use super::{layout, FleetArgs, BRIDGE};
+use super::{layout, params, FleetArgs, BRIDGE};
 
 /// The bridge's `startup_grace_s` with DDS Security (its default is 10 s).
 pub(super) const SECURE_STARTUP_GRACE_S: f64 = 30.0;
@@ -100,14 +100,19 @@ pub(super) struct Plan {
     /// The bridge's `cmd_vel_timeout_s`: `--cmd-vel-timeout`, else
     /// [`CMD_TIMEOUT_PERIODS`] control periods.
     pub(super) cmd_vel_timeout: f64,
+    /// `<log dir>/fleet.yaml`: every child's `--params-file`.
+    pub(super) params_file: PathBuf,
 }
 
 impl Plan {
     pub(super) fn new(mut a: FleetArgs) -> Result<Plan> {
-        // greedy-orca is a robot_node controller (obs::orca), not a checkpoint.
-        if a.policy.as_deref() == Some(Path::new("greedy-orca")) {
-            a.policy = Some("greedy".into());
-            a.robot_params.push("controller:=greedy-orca".into());
+        // greedy-ORCA and matching-ORCA are robot_node controllers (plan crate), not
+        // checkpoints: the robots get `controller:=NAME` and no policy.
+        for script in ["greedy-orca", "matching-orca"] {
+            if a.policy.as_deref() == Some(Path::new(script)) {
+                a.policy = Some("greedy".into());
+                a.robot_params.insert(0, format!("controller:={script}"));
+            }
         }
         a.policy = resolve_policy(a.policy.take());
         let setup: sim::Setup = a.setup.parse().map_err(|e| anyhow!("--setup: {e}"))?;
@@ -169,8 +174,9 @@ impl Plan {
         } else {
             None
         };
-        Ok(Plan {
+        let plan = Plan {
             lockstep: a.mode == "lockstep",
+            params_file: log_dir.join("fleet.yaml"),
             a,
             setup,
             cfg,
@@ -182,7 +188,9 @@ impl Plan {
             per_process,
             keystore,
             cmd_vel_timeout,
-        })
+        };
+        plan.write_params()?;
+        Ok(plan)
     }
 
     /// Before anything starts: is the domain free of other fleets (`--domain auto`: the
@@ -253,38 +261,71 @@ impl Plan {
             .with_context(|| format!("opening {}", p.display()))
     }
 
+    /// The run's parameters file ([`params`]): the bridge's section and the robots'.
+    fn write_params(&self) -> Result<()> {
+        let a = &self.a;
+        let mut b = params::Section::default();
+        b.set("setup", self.setup.to_string())
+            .set("seed", a.seed)
+            .set("mode", a.mode.as_str())
+            .set("rate_hz", a.rate_hz)
+            .set("stale_timeout_s", a.stale_timeout)
+            .set("cmd_vel_timeout_s", self.cmd_vel_timeout)
+            .set("stdin_commands", true);
+        if let Some(c) = &a.config {
+            b.set("config", c.display().to_string());
+        }
+        if let Some(r) = &a.record {
+            b.set("record", r.display().to_string());
+        }
+        if self.lockstep {
+            b.set(
+                "max_steps",
+                (a.duration * a.rate_hz).round().max(1.0) as u64,
+            );
+        }
+        if self.keystore.is_some() {
+            // A secure handshake whose best-effort messages are lost under load is
+            // retried once a second and took 3-9 s with two 6-robot fleets on 2 cores
+            // (third_party/README.md). The bridge waits that long for a robot's first
+            // answer (ADR 0029) before stepping without it.
+            b.set("startup_grace_s", SECURE_STARTUP_GRACE_S);
+        }
+        let s = &self.sizes;
+        let mut r = params::Section::default();
+        r.set("control_rate_hz", a.rate_hz)
+            .set_f32("k_speed", self.cfg.task.k_speed)
+            .set("prep_steps", self.cfg.task.prep_steps)
+            .set_f32("robot_radius", s.robot_radius)
+            .set_f32("machine_half_x", s.machine_half[0])
+            .set_f32("machine_half_y", s.machine_half[1])
+            .set_f32("storage_half_x", s.storage_half[0])
+            .set_f32("storage_half_y", s.storage_half[1])
+            .set("stale_timeout_s", a.stale_timeout);
+        if self.lockstep {
+            r.set("lockstep", true);
+        }
+        if let Some(p) = &a.policy {
+            r.set("policy", p.display().to_string());
+        }
+        params::write(&self.params_file, b, r)
+    }
+
     pub(super) fn spawn_robots(&self, robots: &[String], restart: bool) -> Result<RobotProc> {
-        let f = |x: f32| format!("{:?}", x as f64);
         let label = layout::label(robots);
         let mut c = Command::new(&self.node_bin);
         self.ros_env(&mut c);
+        c.arg("--ros-args")
+            .arg("--params-file")
+            .arg(&self.params_file);
         match robots {
-            [one] => c.args(["--ros-args", "-r", &format!("__ns:=/{one}")]),
-            many => c.args(["--ros-args", "-p", &format!("robots:={}", many.join(","))]),
+            [one] => c.args(["-r", &format!("__ns:=/{one}")]),
+            many => c.args(["-p", &format!("robots:={}", many.join(","))]),
         };
-        let s = &self.sizes;
-        c.args(["-p", &format!("control_rate_hz:={}", self.a.rate_hz)])
-            .args(["-p", &format!("k_speed:={}", f(self.cfg.task.k_speed))])
-            .args(["-p", &format!("prep_steps:={}", self.cfg.task.prep_steps)])
-            .args(["-p", &format!("robot_radius:={}", f(s.robot_radius))])
-            .args(["-p", &format!("machine_half_x:={}", f(s.machine_half[0]))])
-            .args(["-p", &format!("machine_half_y:={}", f(s.machine_half[1]))])
-            .args(["-p", &format!("storage_half_x:={}", f(s.storage_half[0]))])
-            .args(["-p", &format!("storage_half_y:={}", f(s.storage_half[1]))])
-            .args([
-                "-p",
-                &format!("stale_timeout_s:={:?}", self.a.stale_timeout),
-            ])
-            .stdin(Stdio::null())
+        c.stdin(Stdio::null())
             .stdout(Stdio::null())
             .stderr(self.log(&label, restart)?)
             .process_group(0); // Ctrl-C reaches us only; we stop the children in order
-        if self.lockstep {
-            c.args(["-p", "lockstep:=true"]);
-        }
-        if let Some(p) = &self.a.policy {
-            c.args(["-p", &format!("policy:={}", p.display())]);
-        }
         for rp in &self.a.robot_params {
             c.args(["-p", rp]);
         }
@@ -309,43 +350,17 @@ impl Plan {
         restart: bool,
         metrics: Sender<String>,
     ) -> Result<BridgeProc> {
-        let a = &self.a;
         let mut b = Command::new(&self.bridge_bin);
         self.ros_env(&mut b);
-        b.args(["--ros-args", "-p", &format!("setup:={}", self.setup)])
-            .args(["-p", &format!("seed:={}", a.seed)])
-            .args(["-p", &format!("mode:={}", a.mode)])
-            .args(["-p", &format!("rate_hz:={}", a.rate_hz)])
-            .args(["-p", &format!("stale_timeout_s:={:?}", a.stale_timeout)])
-            .args([
-                "-p",
-                &format!("cmd_vel_timeout_s:={:?}", self.cmd_vel_timeout),
-            ])
-            .args(["-p", "stdin_commands:=true"])
+        b.arg("--ros-args")
+            .arg("--params-file")
+            .arg(&self.params_file)
             .stdin(Stdio::piped())
             .stdout(Stdio::piped())
             .stderr(self.log(BRIDGE, restart)?)
             .process_group(0);
-        if let Some(c) = &a.config {
-            b.args(["-p", &format!("config:={}", c.display())]);
-        }
-        if let Some(r) = &a.record {
-            b.args(["-p", &format!("record:={}", r.display())]);
-        }
-        if self.lockstep {
-            let steps = (a.duration * a.rate_hz).round().max(1.0) as u64;
-            b.args(["-p", &format!("max_steps:={steps}")]);
-        }
         if let Some(ks) = &self.keystore {
             super::secure::env(&mut b, ks, keystore::BRIDGE_ENCLAVE);
-            // A secure handshake whose best-effort messages are lost under load is
-            // retried once a second and took 3-9 s with two 6-robot fleets on 2 cores
-            // (third_party/README.md). The bridge waits that long for a robot's first
-            // answer (ADR 0029) before stepping without it.
-            b.args([
-                "-p",
-                &format!("startup_grace_s:={SECURE_STARTUP_GRACE_S:?}"),
-            ]);
         }
         let mut child = b
             .spawn()

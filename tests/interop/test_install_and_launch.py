@@ -17,6 +17,7 @@ import types
 import xml.etree.ElementTree as ET
 
 import pytest
+import rclpy
 import yaml
 
 from conftest import (
@@ -293,3 +294,52 @@ def test_sim_bridge_accepts_the_command_line_launch_ros_builds(monkeypatch, tmp_
     assert ('sim_bridge', '/') in ros.spin_until(
         lambda: (lambda n: n if ('sim_bridge', '/') in n else None)(
             ros.node.get_node_names_and_namespaces()), 10.0, 'node /sim_bridge')
+
+
+def test_launch_passes_a_params_file_first(monkeypatch, tmp_path):
+    """params_file:= goes to every node before the launch arguments (which override it)."""
+    f = tmp_path / 'fleet.yaml'
+    f.write_text('/**/robot_node:\n  ros__parameters:\n    k_speed: 0.4\n')
+    nodes = launch(SCRIPTS / 'fleet.launch.py', monkeypatch, robots='2', params_file=str(f))
+    assert nodes[0]['parameters'] == [str(f), {'setup': '6.4_2', 'seed': 0}]
+    assert nodes[1]['parameters'] == [str(f), {'use_sim_time': True}]
+    with pytest.raises(ValueError, match='params_file'):
+        launch(SCRIPTS / 'fleet.launch.py', monkeypatch, params_file=str(tmp_path / 'none'))
+
+
+TENDING = RELEASE / 'tending'
+
+
+def test_ros2_reads_the_parameters_file_tending_fleet_writes(tmp_path, ros):
+    """`tending fleet` writes fleet.yaml and passes it to every child; ROS 2's own parser
+    (rcl, through rclpy node overrides, wildcards included) reads the same values with the
+    same types: a setup name stays a string, sizes are doubles, counts integers."""
+    require_binary(TENDING)
+    logs = tmp_path / 'logs'
+    r = subprocess.run([TENDING, 'fleet', '--setup', '6.4_2', '--mode', 'lockstep',
+                        '--duration', '0.5', '--domain', str(ros.domain_id + 100),
+                        '--domain-check', '0', '--no-stdin', '--log-dir', str(logs),
+                        '--policy', 'matching-orca'],
+                       capture_output=True, text=True, timeout=120)
+    assert r.returncode == 0, r.stderr[-2000:]
+    assert 'controller matching-orca' in r.stderr
+    f = logs / 'fleet.yaml'
+    from rclpy.parameter import Parameter
+    got = {}
+    for ns, name in [('/', 'sim_bridge'), ('/robot_3', 'robot_node')]:
+        node = rclpy.create_node(name, namespace=ns, context=ros.context,
+                                 cli_args=['--ros-args', '--params-file', str(f)],
+                                 automatically_declare_parameters_from_overrides=True)
+        try:
+            got[name] = {p: node.get_parameter(p) for p in node._parameters}
+        finally:
+            node.destroy_node()
+    b, rb = got['sim_bridge'], got['robot_node']
+    assert b['setup'].type_ == Parameter.Type.STRING and b['setup'].value == '6.4_2'
+    assert b['mode'].value == 'lockstep' and b['max_steps'].value == 5
+    assert b['stdin_commands'].type_ == Parameter.Type.BOOL
+    assert rb['prep_steps'].type_ == Parameter.Type.INTEGER
+    assert rb['robot_radius'].type_ == Parameter.Type.DOUBLE
+    assert abs(rb['robot_radius'].value - 0.08) < 1e-6
+    assert rb['lockstep'].value is True and 'policy' not in rb
+    assert 'setup' not in rb and 'k_speed' not in b

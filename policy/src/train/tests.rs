@@ -823,7 +823,7 @@ fn always_entry(entry: plan::targets::TargetAction) -> Box<crate::Actor> {
 
 /// matching-ORCA, the scripted method (`tending eval --policy matching-orca`), is step
 /// for step the target-action policy that always asks for "matched" behind the deployed
-/// ORCA filter (what the checkpoint `policy/pretrained/matching_orca.safetensors` was).
+/// ORCA filter (what the stand-in checkpoint matching-ORCA once was evaluated as).
 #[test]
 fn matching_orca_is_the_always_matched_policy() {
     let always = Controller::filtered(always_entry(plan::targets::TargetAction::Matched), false);
