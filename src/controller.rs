@@ -2,7 +2,7 @@
 //! checkpoint with its safety-layer flags, and the label their tables show it under.
 
 use anyhow::{bail, Context, Result};
-use plan::{Deployment, FilterMargins, Safety};
+use plan::{Deployment, FilterMargins, Margins, Safety, ScriptMargins};
 use policy::train::Controller;
 use policy::Policy;
 use std::path::Path;
@@ -43,16 +43,41 @@ fn margin_label(m: &FilterMargins) -> String {
     s
 }
 
+/// greedy-ORCA's name with margins other than its defaults: "greedy-orca 30 mm" (a point
+/// of the clearance sweep, which `tending plot pareto --sweep` joins by the "mm" ending),
+/// "greedy-orca obstacles 0.15 s", or both.
+fn script_label(m: &ScriptMargins) -> String {
+    let mut s = String::from("greedy-orca");
+    if m.obstacle_horizon != ScriptMargins::default().obstacle_horizon {
+        s += &format!(" obstacles {} s", m.obstacle_horizon);
+    }
+    if m.clearance != ScriptMargins::default().clearance {
+        s += &format!(" {} mm", mm(m.clearance));
+    }
+    s
+}
+
 /// The scripted method `name` names (greedy | greedy-orca | matching-orca | random), and
-/// its label. matching-ORCA runs behind the ORCA filter with `margins` (named in the label
-/// when they are not the deployed ones); the others ignore them.
-pub fn scripted(name: &str, margins: FilterMargins) -> Result<(Controller, String)> {
+/// its label. matching-ORCA runs behind the ORCA filter with the filter's margins,
+/// greedy-ORCA with its own (each named in the label when not the deployed ones); the
+/// others have none.
+pub fn scripted(name: &str, margins: &Margins) -> Result<(Controller, String)> {
+    let g = margins.greedy_orca;
     Ok(match name {
         "greedy" => (Controller::Greedy, name.into()),
-        "greedy-orca" => (Controller::greedy_orca(), name.into()),
+        "greedy-orca" if g.is_default() => (Controller::greedy_orca(), name.into()),
+        "greedy-orca" => (
+            Controller::GreedyOrca {
+                clearance: g.clearance,
+                obstacle_horizon: g.obstacle_horizon,
+            },
+            script_label(&g),
+        ),
         "matching-orca" => (
-            Controller::MatchingOrca { margins },
-            format!("{name}{}", margin_label(&margins)),
+            Controller::MatchingOrca {
+                margins: margins.filter,
+            },
+            format!("{name}{}", margin_label(&margins.filter)),
         ),
         "random" => (Controller::Random, name.into()),
         o => bail!("unknown --policy `{o}`: expected {SCRIPTS}"),
@@ -110,5 +135,13 @@ pub fn mode(ctrl: &Controller) -> &'static str {
             }
         }
         _ => "scripted",
+    }
+}
+
+/// `--margins FILE` (plan::margins), or the deployed margins without one.
+pub fn margins(path: &Option<std::path::PathBuf>) -> Result<Margins> {
+    match path {
+        Some(p) => Margins::load(p).map_err(|e| anyhow::anyhow!("--margins {e}")),
+        None => Ok(Margins::default()),
     }
 }

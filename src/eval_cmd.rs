@@ -7,7 +7,7 @@ use crate::report::{self, Numbers};
 use crate::stats::markdown_table;
 use anyhow::{bail, Context, Result};
 use clap::Args;
-use policy::train::{evaluate, Controller};
+use policy::train::evaluate;
 use sim::Setup;
 use std::path::PathBuf;
 
@@ -17,7 +17,7 @@ pub struct EvalArgs {
     #[arg(long, conflicts_with = "policy")]
     pub checkpoint: Option<PathBuf>,
     /// Scripted method instead of a checkpoint: greedy | greedy-orca | matching-orca |
-    /// random (matching-ORCA behind the ORCA filter, with the --filter-* margins).
+    /// random (matching-ORCA behind the ORCA filter, with the --margins file's).
     #[arg(long)]
     pub policy: Option<String>,
     #[command(flatten)]
@@ -38,24 +38,12 @@ pub struct EvalArgs {
     /// runs it).
     #[arg(long, requires = "checkpoint", conflicts_with = "orca_filter")]
     pub no_orca_filter: bool,
-    /// Peer clearance of the ORCA filter at full speed, m; at rest the smaller of this and
-    /// --filter-rest-clearance (docs/adr/0019); for a checkpoint behind the filter and for
-    /// matching-orca. greedy-orca keeps its own fixed 0.025 (--script-clearance).
-    #[arg(long, default_value_t = plan::orca::FILTER_CLEARANCE)]
-    pub filter_clearance: f32,
-    /// Peer clearance of the ORCA filter at rest, m (at most --filter-clearance). With
-    /// --filter-clearance, a point of the safety margin's sweep (docs/RESULTS.md 7.7).
-    #[arg(long, default_value_t = plan::orca::FILTER_REST_CLEARANCE)]
-    pub filter_rest_clearance: f32,
-    /// The ORCA filter's horizon for boxes and walls, s (docs/adr/0030).
-    #[arg(long, default_value_t = plan::orca::FILTER_OBSTACLE_HORIZON)]
-    pub filter_obstacle_horizon: f32,
-    /// greedy-ORCA's own peer clearance, m (with --policy greedy-orca).
-    #[arg(long, default_value_t = plan::orca::GREEDY_ORCA_CLEARANCE)]
-    pub script_clearance: f32,
-    /// greedy-ORCA's horizon for boxes and walls, s (with --policy greedy-orca).
-    #[arg(long, default_value_t = plan::orca::OBSTACLE_HORIZON)]
-    pub script_obstacle_horizon: f32,
+    /// Safety margins (TOML, plan::margins): the ORCA filter's, for a checkpoint behind
+    /// it and for matching-orca, and greedy-ORCA's own; e.g. configs/margins/*.toml.
+    /// Default: configs/margins/deployed.toml's, what robot_node deploys. Margins other
+    /// than those are named in the results' labels.
+    #[arg(long)]
+    pub margins: Option<PathBuf>,
     /// Scenario config (TOML); default: the simulator's defaults.
     #[arg(long)]
     pub scenario: Option<PathBuf>,
@@ -99,69 +87,19 @@ impl Runs {
     }
 }
 
-/// greedy-ORCA's name with margins other than its defaults: "greedy-orca 30 mm" (a point
-/// of the clearance sweep, which `tending plot pareto --sweep` joins by the "mm" ending),
-/// "greedy-orca obstacles 0.15 s", or both.
-fn script_label(clearance: f32, obstacle_horizon: f32) -> String {
-    let mut s = String::from("greedy-orca");
-    if obstacle_horizon != plan::orca::OBSTACLE_HORIZON {
-        s += &format!(" obstacles {obstacle_horizon} s");
-    }
-    if clearance != plan::orca::GREEDY_ORCA_CLEARANCE {
-        s += &format!(" {} mm", crate::controller::mm(clearance));
-    }
-    s
-}
-
 pub fn run(a: EvalArgs) -> Result<()> {
-    for (name, v) in [
-        ("--filter-clearance", a.filter_clearance),
-        ("--filter-rest-clearance", a.filter_rest_clearance),
-        ("--script-clearance", a.script_clearance),
-    ] {
-        if !(v.is_finite() && v > 0.0) {
-            bail!("{name} {v}: must be a positive number of metres");
-        }
-    }
-    for (name, v) in [
-        ("--filter-obstacle-horizon", a.filter_obstacle_horizon),
-        ("--script-obstacle-horizon", a.script_obstacle_horizon),
-    ] {
-        if !(v.is_finite() && v > 0.0) {
-            bail!("{name} {v}: must be a positive number of seconds");
-        }
-    }
-    let script_default = a.script_clearance == plan::orca::GREEDY_ORCA_CLEARANCE
-        && a.script_obstacle_horizon == plan::orca::OBSTACLE_HORIZON;
-    if !script_default && a.policy.as_deref() != Some("greedy-orca") {
-        bail!(
-            "--script-clearance and --script-obstacle-horizon are greedy-ORCA's: pass them \
-             with --policy greedy-orca"
-        );
-    }
-    let margins = plan::FilterMargins {
-        clearance: a.filter_clearance,
-        rest_clearance: a.filter_rest_clearance,
-        obstacle_horizon: a.filter_obstacle_horizon,
-    };
+    let margins = crate::controller::margins(&a.margins)?;
     let (ctrl, label) = match (&a.checkpoint, a.policy.as_deref()) {
         (Some(p), None) => {
             let flags = CheckpointFlags {
                 sample: a.sample,
                 shield: a.shield,
                 orca_filter: (a.orca_filter || a.no_orca_filter).then_some(a.orca_filter),
-                margins,
+                margins: margins.filter,
             };
             crate::controller::checkpoint(p, &flags)?
         }
-        (None, Some("greedy-orca")) if !script_default => (
-            Controller::GreedyOrca {
-                clearance: a.script_clearance,
-                obstacle_horizon: a.script_obstacle_horizon,
-            },
-            script_label(a.script_clearance, a.script_obstacle_horizon),
-        ),
-        (None, Some(name)) => crate::controller::scripted(name, margins)?,
+        (None, Some(name)) => crate::controller::scripted(name, &margins)?,
         (None, None) => bail!(
             "pass --checkpoint <file> or --policy {}",
             crate::controller::SCRIPTS
@@ -243,149 +181,131 @@ mod tests {
         Cli::try_parse_from(base.iter().chain(extra)).unwrap().a
     }
 
-    /// A swept clearance is part of the method's name in the results, and a clearance a
-    /// controller does not use, or that is not a distance, is refused by name.
+    /// A margins file in a fresh directory; its path.
+    fn margins_file(dir: &std::path::Path, name: &str, text: &str) -> String {
+        std::fs::create_dir_all(dir).unwrap();
+        let p = dir.join(name);
+        std::fs::write(&p, text).unwrap();
+        p.to_str().unwrap().to_string()
+    }
+
+    const BUNDLED: &str = concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/policy/pretrained/smappo_6.4_2.safetensors"
+    );
+
+    /// Margins other than the deployed ones are part of a method's name in the results
+    /// (sweeps join rows by it), for greedy-ORCA, a checkpoint behind the filter and
+    /// matching-ORCA; the deployed ones leave the name as it was.
     #[test]
-    fn clearances_are_named_in_results_and_checked() {
-        let dir = std::env::temp_dir().join(format!("tending-eval-{}", std::process::id()));
-        let out = dir.to_str().unwrap();
+    fn margins_from_a_file_are_named_in_results() {
+        let dir = std::env::temp_dir().join(format!("tending-eval-m-{}", std::process::id()));
+        let out = dir.join("out");
+        let out = out.to_str().unwrap();
+        let first_row = || {
+            let csv = std::fs::read_to_string(dir.join("out/results.csv")).unwrap();
+            csv.lines().nth(1).unwrap().to_string()
+        };
+        let cases = [
+            (
+                "--policy greedy-orca",
+                "[greedy_orca]\nclearance = 0.03\n",
+                "greedy-orca 30 mm,2.2_2,0,1,",
+            ),
+            (
+                "--policy greedy-orca",
+                "[greedy_orca]\nobstacle_horizon = 0.15\nclearance = 0.03\n",
+                "greedy-orca obstacles 0.15 s 30 mm,2.2_2,",
+            ),
+            (
+                "--policy matching-orca",
+                "[filter]\nobstacle_horizon = 0.3\nclearance = 0.035\n",
+                "matching-orca obstacles 0.3 s 30/35 mm,2.2_2,",
+            ),
+            (
+                "--checkpoint BUNDLED",
+                "[filter]\nrest_clearance = 0.025\n",
+                "smappo targets+orca 25/40 mm (smappo_6.4_2.safetensors)",
+            ),
+            (
+                "--checkpoint BUNDLED",
+                "[filter]\nobstacle_horizon = 0.3\n",
+                "smappo targets+orca obstacles 0.3 s (smappo_6.4_2",
+            ),
+            // greedy-ORCA's margins do not rename a checkpoint, nor the filter's greedy-ORCA
+            (
+                "--checkpoint BUNDLED",
+                "[greedy_orca]\nclearance = 0.03\n",
+                "smappo targets+orca (smappo_6.4_2",
+            ),
+            (
+                "--policy greedy-orca",
+                "[filter]\nclearance = 0.05\n",
+                "greedy-orca,2.2_2,",
+            ),
+        ];
+        for (method, toml, label) in cases {
+            let m = margins_file(&dir, "m.toml", toml);
+            let method = method.replace("BUNDLED", BUNDLED);
+            let mut a: Vec<&str> = method.split(' ').collect();
+            a.extend(["--margins", &m, "--out", out]);
+            run(args(&a)).unwrap();
+            assert!(
+                first_row().starts_with(label),
+                "{method} {toml}: {}",
+                first_row()
+            );
+        }
+        let deployed = concat!(env!("CARGO_MANIFEST_DIR"), "/configs/margins/deployed.toml");
         run(args(&[
-            "--policy",
-            "greedy-orca",
-            "--script-clearance",
-            "0.03",
+            "--checkpoint",
+            BUNDLED,
+            "--margins",
+            deployed,
             "--out",
             out,
         ]))
         .unwrap();
-        let csv = std::fs::read_to_string(dir.join("results.csv")).unwrap();
-        assert!(csv
-            .lines()
-            .nth(1)
-            .unwrap()
-            .starts_with("greedy-orca 30 mm,2.2_2,0,1,"));
-        let bundled = concat!(
-            env!("CARGO_MANIFEST_DIR"),
-            "/policy/pretrained/smappo_6.4_2.safetensors"
-        );
-        let e = run(args(&[
-            "--checkpoint",
-            bundled,
-            "--script-clearance",
-            "0.03",
-        ]));
-        assert!(e.unwrap_err().to_string().contains("--script-clearance"));
-        let e = run(args(&[
-            "--checkpoint",
-            bundled,
-            "--filter-rest-clearance=-0.01",
-        ]));
-        assert!(e
-            .unwrap_err()
-            .to_string()
-            .contains("--filter-rest-clearance"));
-        run(args(&[
-            "--checkpoint",
-            bundled,
-            "--filter-rest-clearance",
-            "0.025",
-            "--out",
-            out,
-        ]))
-        .unwrap();
-        let csv = std::fs::read_to_string(dir.join("results.csv")).unwrap();
-        assert!(csv.contains("smappo targets+orca 25/40 mm (smappo_6.4_2.safetensors)"));
+        assert!(first_row().starts_with("smappo targets+orca (smappo_6.4_2"));
+        run(args(&["--policy", "matching-orca", "--out", out])).unwrap();
+        assert!(first_row().starts_with("matching-orca,2.2_2,0,1,"));
         std::fs::remove_dir_all(&dir).ok();
     }
 
-    /// An obstacle horizon other than a controller's default is part of its name
-    /// (docs/adr/0030), and one that is not a positive time, or is greedy-ORCA's without
-    /// greedy-ORCA, is refused by name.
+    /// A bad margins file is refused naming the flag, the file and the key.
     #[test]
-    fn obstacle_horizons_are_named_in_results_and_checked() {
-        let dir = std::env::temp_dir().join(format!("tending-eval-obst-{}", std::process::id()));
-        let out = dir.to_str().unwrap();
-        let first_row = || {
-            let csv = std::fs::read_to_string(dir.join("results.csv")).unwrap();
-            csv.lines().nth(1).unwrap().to_string()
-        };
-        let script = ["--policy", "greedy-orca", "--out", out];
-        run(args(
-            &[&script[..], &["--script-obstacle-horizon", "0.15"]].concat(),
-        ))
-        .unwrap();
-        assert!(first_row().starts_with("greedy-orca obstacles 0.15 s,2.2_2,"));
-        let both = [
-            "--script-obstacle-horizon",
-            "0.15",
-            "--script-clearance",
-            "0.03",
-        ];
-        run(args(&[&script[..], &both[..]].concat())).unwrap();
-        assert!(first_row().starts_with("greedy-orca obstacles 0.15 s 30 mm,2.2_2,"));
-        let bundled = concat!(
-            env!("CARGO_MANIFEST_DIR"),
-            "/policy/pretrained/smappo_6.4_2.safetensors"
-        );
-        let ck = ["--checkpoint", bundled, "--out", out];
-        run(args(
-            &[&ck[..], &["--filter-obstacle-horizon", "0.3"]].concat(),
-        ))
-        .unwrap();
-        assert!(first_row().starts_with("smappo targets+orca obstacles 0.3 s (smappo_6.4_2"));
-        // the default horizon leaves the name as it was
-        run(args(&ck)).unwrap();
-        assert!(first_row().starts_with("smappo targets+orca (smappo_6.4_2"));
-        for bad in [
-            "--filter-obstacle-horizon=0",
-            "--filter-obstacle-horizon=NaN",
-            "--script-obstacle-horizon=-0.1",
+    fn bad_margins_are_refused_by_name() {
+        let dir = std::env::temp_dir().join(format!("tending-eval-bad-{}", std::process::id()));
+        for (toml, key) in [
+            (
+                "[filter]\nobstacle_horizon = 0.0\n",
+                "filter.obstacle_horizon",
+            ),
+            (
+                "[filter]\nrest_clearance = -0.01\n",
+                "filter.rest_clearance",
+            ),
+            ("[greedy_orca]\nclearance = nan\n", "greedy_orca.clearance"),
+            ("[filter]\nhorizon = 0.2\n", "horizon"),
         ] {
-            let e = run(args(&["--checkpoint", bundled, bad])).unwrap_err();
-            let name = bad.split('=').next().unwrap();
-            assert!(e.to_string().contains(name), "{bad}: {e}");
+            let m = margins_file(&dir, "bad.toml", toml);
+            let e = run(args(&["--checkpoint", BUNDLED, "--margins", &m]))
+                .unwrap_err()
+                .to_string();
+            assert!(
+                e.contains("--margins") && e.contains("bad.toml") && e.contains(key),
+                "{toml}: {e}"
+            );
         }
         let e = run(args(&[
-            "--checkpoint",
-            bundled,
-            "--script-obstacle-horizon",
-            "0.15",
-        ]));
-        assert!(e
-            .unwrap_err()
-            .to_string()
-            .contains("--script-obstacle-horizon"));
-        std::fs::remove_dir_all(&dir).ok();
-    }
-
-    /// matching-ORCA is a scripted method: named "matching-orca", behind the ORCA filter
-    /// whose margins, when not the deployed ones, are part of its name as a checkpoint's.
-    #[test]
-    fn matching_orca_is_a_script_named_with_its_margins() {
-        let dir = std::env::temp_dir().join(format!("tending-eval-mo-{}", std::process::id()));
-        let out = dir.to_str().unwrap();
-        let first_row = || {
-            let csv = std::fs::read_to_string(dir.join("results.csv")).unwrap();
-            csv.lines().nth(1).unwrap().to_string()
-        };
-        let script = ["--policy", "matching-orca", "--out", out];
-        run(args(&script)).unwrap();
-        assert!(first_row().starts_with("matching-orca,2.2_2,0,1,"));
-        let swept = [
-            "--filter-obstacle-horizon",
-            "0.3",
-            "--filter-clearance",
-            "0.035",
-        ];
-        run(args(&[&script[..], &swept[..]].concat())).unwrap();
-        assert!(first_row().starts_with("matching-orca obstacles 0.3 s 30/35 mm,2.2_2,"));
-        let e = run(args(&[
             "--policy",
-            "matching-orca",
-            "--script-clearance",
-            "0.03",
-        ]));
-        assert!(e.unwrap_err().to_string().contains("--script-clearance"));
+            "greedy",
+            "--margins",
+            "/nonexistent/m.toml",
+        ]))
+        .unwrap_err()
+        .to_string();
+        assert!(e.contains("/nonexistent/m.toml"), "{e}");
         let e = run(args(&["--policy", "matched"])).unwrap_err().to_string();
         assert!(e.contains("matching-orca"), "{e}");
         std::fs::remove_dir_all(&dir).ok();

@@ -22,7 +22,7 @@ pub struct ParetoArgs {
     pub title: String,
     /// Fit the parts axis to the points instead of starting it at 0, and join the points
     /// of one method at different safety margins (names ending in "N mm" or "N/M mm",
-    /// `tending eval --script-clearance`, `--filter-clearance`) with a line: a sweep's
+    /// `tending eval --margins` files) with a line: a sweep's
     /// front (bench/safety/margin_sweep.sh).
     #[arg(long)]
     pub sweep: bool,

@@ -39,9 +39,14 @@ pub struct SimArgs {
     pub episodes: u64,
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
-    /// Scenario config (TOML); defaults are documented in sim/src/config.rs.
+    /// Scenario config (TOML); defaults are documented in sim/src/config.rs. (`--config`,
+    /// its old name, still works.)
+    #[arg(long, alias = "config")]
+    pub scenario: Option<PathBuf>,
+    /// Safety margins (TOML, plan::margins, e.g. configs/margins/*.toml); default: the
+    /// deployed ones.
     #[arg(long)]
-    pub config: Option<PathBuf>,
+    pub margins: Option<PathBuf>,
     /// Draw the first episode: .gif (animation) or .svg (final frame) or a directory of
     /// PNG frames (ends with /).
     #[arg(long)]
@@ -57,15 +62,15 @@ pub fn load_config(path: &Option<PathBuf>) -> Result<ScenarioConfig> {
 
 /// The controller the arguments name, and its label for the table.
 fn controller(a: &SimArgs) -> Result<(Controller, String)> {
-    let margins = plan::FilterMargins::DEPLOYED;
+    let margins = crate::controller::margins(&a.margins)?;
     let Some(path) = &a.checkpoint else {
-        return crate::controller::scripted(&a.policy, margins);
+        return crate::controller::scripted(&a.policy, &margins);
     };
     let flags = CheckpointFlags {
         sample: a.sample,
         shield: a.shield,
         orca_filter: a.orca_filter.then_some(true),
-        margins,
+        margins: margins.filter,
     };
     crate::controller::checkpoint(path, &flags)
 }
@@ -101,7 +106,7 @@ fn episodes(a: &SimArgs, cfg: &ScenarioConfig) -> Result<(String, Vec<Metrics>)>
 }
 
 pub fn run(a: SimArgs) -> Result<()> {
-    let cfg = load_config(&a.config)?;
+    let cfg = load_config(&a.scenario)?;
     let t0 = std::time::Instant::now();
     let (label, ms) = episodes(&a, &cfg)?;
     let setup: Setup = a.setup.parse()?;

@@ -11,6 +11,9 @@ setups="${SETUPS:-6.4_2,30.6_1,40.40_2,42.28_14,60.12_3,80.40_4,90.20_3,100.8_1,
 eps="${EPISODES:-30}"
 seeds="${SEEDS:-0,1,2}"
 out="${OUT:-docs/safety/margin}"
+margins() { # TOML text -> a margins file (plan::margins) for this point of the sweep
+    local f; f="$(mktemp -t margins.XXXXXX.toml)"; printf '%b' "$1" > "$f"; echo "$f"
+}
 run() { # name, eval flags...
     local name=$1; shift
     echo "== $name"
@@ -18,10 +21,11 @@ run() { # name, eval flags...
 }
 for rf in 35/40 30/40 25/40 30/30 25/25 20/20; do
     rest=${rf%/*}; full=${rf#*/}
-    run "policy-$rest-$full" --checkpoint "$ck" --filter-rest-clearance "0.0$rest" --filter-clearance "0.0$full"
+    run "policy-$rest-$full" --checkpoint "$ck" \
+        --margins "$(margins "[filter]\\nrest_clearance = 0.0$rest\\nclearance = 0.0$full\\n")"
 done
 for c in 15 20 25 30 35 40; do
-    run "greedy-orca-$c" --policy greedy-orca --script-clearance "0.0$c"
+    run "greedy-orca-$c" --policy greedy-orca --margins "$(margins "[greedy_orca]\\nclearance = 0.0$c\\n")"
 done
 "$bin" plot pareto "$out"/*/results.csv --sweep --out "$out/pareto.png" --title "parts vs contacts: the safety margin (policy: rest/full-speed clearance; greedy-ORCA: its clearance)"
 echo "wrote $out/pareto.png"

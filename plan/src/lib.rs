@@ -15,7 +15,8 @@
 //! - [`shield`]: the one-step action shield over discrete moves ([`action`]);
 //! - [`pilot`]: actor output -> menu target -> planner -> ORCA filter or shield, the one
 //!   path a learned policy (or matching-ORCA) drives through, with the rule for when the
-//!   filter is on ([`Safety`]).
+//!   filter is on ([`Safety`]);
+//! - [`margins`]: the filter's and greedy-ORCA's margins as a named TOML file.
 
 pub mod action;
 pub mod detour;
@@ -23,6 +24,7 @@ pub mod fleet;
 pub mod geom;
 pub mod greedy;
 pub mod machine_clock;
+pub mod margins;
 pub mod matching;
 pub mod orca;
 pub mod pilot;
@@ -31,4 +33,5 @@ pub mod storage_queue;
 pub mod targets;
 
 pub use fleet::FleetParams;
+pub use margins::{Margins, ScriptMargins};
 pub use pilot::{Deployment, FilterMargins, MatchingOrca, Outputs, Pilot, Row, Safety};

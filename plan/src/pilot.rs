@@ -51,8 +51,10 @@ pub enum Outputs {
 }
 
 /// Margins of the ORCA filter behind a learned policy: peer clearance at full speed and
-/// at rest (docs/adr/0017, 0019), horizon for boxes and walls (docs/adr/0030).
-#[derive(Debug, Clone, Copy, PartialEq)]
+/// at rest (docs/adr/0017, 0019), horizon for boxes and walls (docs/adr/0030). The
+/// `[filter]` table of a margins file ([`crate::margins`]).
+#[derive(Debug, Clone, Copy, PartialEq, serde::Deserialize)]
+#[serde(deny_unknown_fields, default)]
 pub struct FilterMargins {
     /// Peer clearance at full speed, m.
     pub clearance: f32,

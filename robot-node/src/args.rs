@@ -40,6 +40,9 @@ pub struct Params {
     /// That filter's horizon for boxes and walls, s (`plan::orca::FILTER_OBSTACLE_HORIZON`,
     /// ADR 0030; greedy-orca keeps `plan::orca::OBSTACLE_HORIZON`).
     pub orca_obstacle_horizon: f64,
+    /// A margins file (plan::margins, e.g. configs/margins/*.toml): its `[filter]` table
+    /// sets the three `orca_*` parameters above that are not given themselves.
+    pub margins: Option<PathBuf>,
     /// Pick/place reach beyond the robot radius (greedy-orca stops within it); default:
     /// `robot_radius` (the simulator's default reach equals its radius at every scale).
     pub reach: Option<f64>,
@@ -122,6 +125,7 @@ impl Default for Params {
             orca_clearance: plan::orca::FILTER_CLEARANCE as f64,
             orca_rest_clearance: plan::orca::FILTER_REST_CLEARANCE as f64,
             orca_obstacle_horizon: plan::orca::FILTER_OBSTACLE_HORIZON as f64,
+            margins: None,
             reach: None,
             control_rate_hz: 10.0,
             use_sim_time: false,
@@ -158,7 +162,8 @@ impl Params {
 pub const USAGE: &str = "usage: robot_node [--ros-args -r __ns:=/robot_N [-r __node:=NAME] \
 [-p NAME:=VALUE]... [--params-file FILE.yaml]... [--log-level LEVEL]]
 parameters: policy (path), controller (greedy|greedy-orca|matching-orca|policy), shield (false), orca_filter (true unless shield:=true), orca_clearance (0.04 m at full speed), orca_rest_clearance (0.03 m at rest),
-            orca_obstacle_horizon (0.15 s), control_rate_hz (10),
+            orca_obstacle_horizon (0.15 s), margins (a plan::margins TOML file setting the three
+            orca_* not given), control_rate_hz (10),
             use_sim_time (false), reach (= robot_radius),
             k_speed (0.5), prep_steps (20), stale_timeout_s (1.0), static_stale_timeout_s (= stale_timeout_s, <=0 off),
             room_margin (0.25), stats_period_s (10), discovery_period_s (0.5),
@@ -186,6 +191,34 @@ where
     let was_set = |n: &str| set.iter().any(|s| s == n);
     if p.lockstep {
         p.use_sim_time = true;
+    }
+    if let Some(f) = &p.margins {
+        let m = plan::Margins::load(f).map_err(|e| param_error("margins", e))?;
+        if !m.greedy_orca.is_default() {
+            return Err(param_error(
+                "margins",
+                "robot_node runs greedy-ORCA with its built-in margins: a [greedy_orca] \
+                 table is for `tending eval` and `tending sim` only",
+            ));
+        }
+        let f = m.filter;
+        for (name, v, field) in [
+            ("orca_clearance", f.clearance, &mut p.orca_clearance),
+            (
+                "orca_rest_clearance",
+                f.rest_clearance,
+                &mut p.orca_rest_clearance,
+            ),
+            (
+                "orca_obstacle_horizon",
+                f.obstacle_horizon,
+                &mut p.orca_obstacle_horizon,
+            ),
+        ] {
+            if !was_set(name) {
+                *field = v as f64;
+            }
+        }
     }
     if !was_set("static_stale_timeout_s") {
         p.static_stale_timeout_s = p.stale_timeout_s;
@@ -224,6 +257,7 @@ fn apply_param(p: &mut Params, name: &str, v: &ParamValue) -> Result<bool, ArgEr
         "orca_clearance" => p.orca_clearance = positive(name, v)?,
         "orca_rest_clearance" => p.orca_rest_clearance = positive(name, v)?,
         "orca_obstacle_horizon" => p.orca_obstacle_horizon = positive(name, v)?,
+        "margins" => p.margins = optional_path(name, v, "path")?,
         "control_rate_hz" => p.control_rate_hz = rate_hz(name, v)?,
         "use_sim_time" => p.use_sim_time = boolean(name, v)?,
         "k_speed" => p.k_speed = positive(name, v)?,
@@ -585,6 +619,38 @@ robot_node:
         assert!(!v.iter().any(|(_, x)| *x == ParamValue::Double(99.0)));
         assert!(parse_params_yaml("- a\n- b\n", "/", "robot_node").is_err());
         assert!(parse_params_yaml(":::\n  -", "/", "robot_node").is_err());
+    }
+
+    #[test]
+    fn a_margins_file_sets_the_filter_parameters_not_given() {
+        let dir = std::env::temp_dir().join(format!("robot_node_margins_{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let f = dir.join("m.toml");
+        std::fs::write(&f, "[filter]\nclearance = 0.05\nobstacle_horizon = 0.3\n").unwrap();
+        let m = format!("margins:={}", f.display());
+        let p = parse_ok(&["--ros-args", "-p", &m, "-p", "orca_obstacle_horizon:=0.2"]);
+        assert_eq!(p.orca_clearance, 0.05f32 as f64);
+        // the file leaves out the rest clearance, so the deployed one stays
+        assert_eq!(
+            p.orca_rest_clearance,
+            plan::orca::FILTER_REST_CLEARANCE as f64
+        );
+        // a parameter given itself wins over the file
+        assert_eq!(p.orca_obstacle_horizon, 0.2);
+        std::fs::write(&f, "[filter]\nclearance = 0\n").unwrap();
+        let e = parse(["--ros-args", "-p", m.as_str()], None)
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("margins") && e.contains("filter.clearance"),
+            "{e}"
+        );
+        std::fs::write(&f, "[greedy_orca]\nclearance = 0.03\n").unwrap();
+        let e = parse(["--ros-args", "-p", m.as_str()], None)
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("greedy_orca"), "{e}");
+        std::fs::remove_dir_all(&dir).ok();
     }
 
     #[test]

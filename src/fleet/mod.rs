@@ -71,9 +71,15 @@ pub struct FleetArgs {
     /// (default 2, or 4 with --secure: handshakes come first); 0 skips the check.
     #[arg(long)]
     pub domain_check: Option<f64>,
-    /// Scenario TOML for the bridge (default: built-in).
+    /// Scenario config (TOML) for the bridge; default: the simulator's defaults.
+    /// (`--config`, its old name, still works.)
+    #[arg(long, alias = "config")]
+    pub scenario: Option<PathBuf>,
+    /// Safety margins (TOML, plan::margins, e.g. configs/margins/*.toml): the ORCA
+    /// filter's go to every robot_node (orca_clearance, orca_rest_clearance,
+    /// orca_obstacle_horizon in the fleet's parameters file); default: the deployed ones.
     #[arg(long)]
-    pub config: Option<PathBuf>,
+    pub margins: Option<PathBuf>,
     /// Directory for the children's logs (default: a temporary directory).
     #[arg(long)]
     pub log_dir: Option<PathBuf>,

@@ -102,6 +102,8 @@ pub(super) struct Plan {
     pub(super) cmd_vel_timeout: f64,
     /// `<log dir>/fleet.yaml`: every child's `--params-file`.
     pub(super) params_file: PathBuf,
+    /// The ORCA filter's margins (`--margins`), for every robot_node.
+    pub(super) margins: plan::FilterMargins,
 }
 
 impl Plan {
@@ -135,11 +137,22 @@ impl Plan {
                 bail!("policy checkpoint {} does not exist", p.display());
             }
         }
-        let cfg = match &a.config {
+        let cfg = match &a.scenario {
             Some(p) => sim::ScenarioConfig::load(p).map_err(|e| anyhow!("{}: {e}", p.display()))?,
             None => sim::ScenarioConfig::default(),
         };
         let sizes = *sim::Env::new(cfg.clone(), setup, a.seed)?.sizes();
+        let margins = match &a.margins {
+            Some(p) => plan::Margins::load(p).map_err(|e| anyhow!("--margins {e}"))?,
+            None => plan::Margins::default(),
+        };
+        // robot_node runs greedy-ORCA with its built-in margins: refuse rather than ignore
+        if !margins.greedy_orca.is_default() {
+            bail!(
+                "--margins: robot_node runs greedy-ORCA with its built-in margins; the file's \
+                 [greedy_orca] table is for `tending eval` and `tending sim` only"
+            );
+        }
         let env_domain = || {
             std::env::var("ROS_DOMAIN_ID")
                 .ok()
@@ -188,6 +201,7 @@ impl Plan {
             per_process,
             keystore,
             cmd_vel_timeout,
+            margins: margins.filter,
         };
         plan.write_params()?;
         Ok(plan)
@@ -272,7 +286,7 @@ impl Plan {
             .set("stale_timeout_s", a.stale_timeout)
             .set("cmd_vel_timeout_s", self.cmd_vel_timeout)
             .set("stdin_commands", true);
-        if let Some(c) = &a.config {
+        if let Some(c) = &a.scenario {
             b.set("config", c.display().to_string());
         }
         if let Some(r) = &a.record {
@@ -301,7 +315,10 @@ impl Plan {
             .set_f32("machine_half_y", s.machine_half[1])
             .set_f32("storage_half_x", s.storage_half[0])
             .set_f32("storage_half_y", s.storage_half[1])
-            .set("stale_timeout_s", a.stale_timeout);
+            .set("stale_timeout_s", a.stale_timeout)
+            .set_f32("orca_clearance", self.margins.clearance)
+            .set_f32("orca_rest_clearance", self.margins.rest_clearance)
+            .set_f32("orca_obstacle_horizon", self.margins.obstacle_horizon);
         if self.lockstep {
             r.set("lockstep", true);
         }

@@ -39,7 +39,7 @@ pub const GREEDY_ORCA_CLEARANCE: f32 = 0.025;
 /// x 20 episodes, 28 setups) 0.15 s gives it 1.039x the parts but up to twice the contact
 /// steps where the storages are crowded (80.40_4 16.2 -> 32.1, 90.20_3 9.5 -> 21.4), and
 /// the script is the baseline whose contacts the policy must not exceed;
-/// `tending eval --script-obstacle-horizon` runs the other point (docs/RESULTS.md 7.18).
+/// `tending eval --margins configs/margins/greedy-orca-0.15.toml` runs the other point.
 pub const OBSTACLE_HORIZON: f32 = 0.3;
 
 /// [`OBSTACLE_HORIZON`] of the ORCA filter behind a learned policy (offline, in training
@@ -167,7 +167,7 @@ impl OrcaParams {
     /// [`Self::for_policy`] behind the filter with both clearances given: `clearance` at
     /// full speed, `rest` (or `clearance` if smaller) at rest, and the filter's
     /// [`FILTER_OBSTACLE_HORIZON`]. For sweeps of the safety margin (`tending eval
-    /// --filter-clearance --filter-rest-clearance`); chain [`Self::with_obstacle_horizon`]
+    /// --margins`, [`crate::margins`]); chain [`Self::with_obstacle_horizon`]
     /// for another horizon.
     pub fn for_policy_filter(self, clearance: f32, rest: f32) -> Self {
         self.with_clearance(clearance)
