@@ -83,6 +83,21 @@ fn check_timeouts(cmd_vel: f64, stale: f64) -> Result<()> {
     Ok(())
 }
 
+/// A keystore's documents cover domains up to [`msgs::enclave::MAX_SECURE_DOMAIN`] (230:
+/// Cyclone DDS refuses documents naming a higher one), below ROS's 232: refused here
+/// once, with the reason, rather than by every child.
+fn check_secure_domain(secure: bool, domain: u16) -> Result<()> {
+    let max = msgs::enclave::MAX_SECURE_DOMAIN;
+    if secure && domain > max {
+        bail!(
+            "ROS domain id {domain}: a secure fleet runs on domains 0..={max} (the keystore's \
+             governance and permissions cover those; ROS allows up to {MAX_DOMAIN} without \
+             security)"
+        );
+    }
+    Ok(())
+}
+
 /// Everything fixed for the run: what to start and how.
 pub(super) struct Plan {
     pub(super) a: FleetArgs,
@@ -167,6 +182,7 @@ impl Plan {
         if domain > MAX_DOMAIN {
             bail!("ROS domain id {domain} (--domain or ROS_DOMAIN_ID) is above {MAX_DOMAIN}");
         }
+        check_secure_domain(a.secure, domain)?;
         if a.domain_check.is_some_and(|s| !(s.is_finite() && s >= 0.0)) {
             bail!("--domain-check must be a number of seconds >= 0");
         }
@@ -234,6 +250,7 @@ impl Plan {
         };
         let auto = self.a.domain == Some(DomainArg::Auto);
         self.domain = domain::claim(&mut guard, self.domain, auto, &security, for_s, !secure)?;
+        check_secure_domain(secure, self.domain)?;
         Ok(guard)
     }
 
@@ -402,6 +419,14 @@ impl Plan {
 #[cfg(test)]
 mod tests {
     use super::check_timeouts;
+
+    #[test]
+    fn a_secure_fleet_is_refused_above_domain_230_with_the_reason() {
+        assert!(check_secure_domain(true, 230).is_ok());
+        assert!(check_secure_domain(false, 232).is_ok());
+        let e = check_secure_domain(true, 231).unwrap_err().to_string();
+        assert!(e.contains("231") && e.contains("0..=230"), "{e}");
+    }
 
     #[test]
     fn the_command_timeout_must_be_below_the_stale_timeout() {
