@@ -418,7 +418,7 @@ impl Plan {
 
 #[cfg(test)]
 mod tests {
-    use super::check_timeouts;
+    use super::{check_secure_domain, check_timeouts};
 
     #[test]
     fn a_secure_fleet_is_refused_above_domain_230_with_the_reason() {
