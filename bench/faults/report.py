@@ -9,7 +9,11 @@ block DOC lacks is written to OUTDIR/KEY.md (default bench/faults/out) and named
 Without DOC, every section goes to stdout.
 
 netns also writes an SVG bar chart (mean and std per case, one dot per run) next to DOC:
-faults_netns.svg.
+faults_netns.svg (security off; faults_netns_secure.svg with it on).
+
+Rows carry `secure` (DDS Security on or off, bench/faults/run.sh SECURE=both): a section with
+both renders the two one after the other in its block, each under its heading, security off
+first, so the figures stand side by side.
 """
 import json, math, os, re, sys
 
@@ -220,22 +224,35 @@ def netns_svg(rows):
     return "\n".join(e) + "\n"
 
 
+MODES = [(False, "DDS Security off"), (True, "DDS Security on (every process its own enclave, enforced)")]
+
+
+def by_mode(rows, render):
+    """`render` of each mode's rows; with both modes, each under its heading."""
+    parts = [(title, [r for r in rows if bool(r.get("secure")) == on]) for on, title in MODES]
+    parts = [(t, rs) for t, rs in parts if rs]
+    if len(parts) == 1:
+        return render(parts[0][1])
+    return "\n\n".join(f"**{t}**\n\n{render(rs)}" for t, rs in parts)
+
+
 def main():
     rows = [json.loads(l) for l in open(sys.argv[1]) if l.strip()]
     doc = sys.argv[2] if len(sys.argv) > 2 else None
     outdir = sys.argv[3] if len(sys.argv) > 3 else "bench/faults/out"
     sections = {}
-    for r in rows:
-        if r["fault"] == "bridge SIGKILLed and restarted":
-            sections["restart"] = restart_md(r)
-        elif r["fault"] == "hostile publisher":
-            sections["hostile"] = hostile_md(r)
-    kills = [r for r in rows if r["fault"] == "robot SIGKILLed in a realtime fleet"]
+    of = lambda fault: [r for r in rows if r["fault"] == fault]
+    # restart and hostile: one run each per mode (the last one if repeated)
+    if of("bridge SIGKILLed and restarted"):
+        sections["restart"] = by_mode(of("bridge SIGKILLed and restarted"), lambda rs: restart_md(rs[-1]))
+    if of("hostile publisher"):
+        sections["hostile"] = by_mode(of("hostile publisher"), lambda rs: hostile_md(rs[-1]))
+    kills = of("robot SIGKILLed in a realtime fleet")
     if kills:
-        sections["kill"] = kill_md(kills)
-    netns = [r for r in rows if r["fault"] == "netns"]
+        sections["kill"] = by_mode(kills, kill_md)
+    netns = of("netns")
     if netns:
-        sections["netns"] = netns_md(netns)
+        sections["netns"] = by_mode(netns, netns_md)
     if doc is None:
         for k, v in sections.items():
             print(f"<!-- {k} -->\n{v}\n")
@@ -252,10 +269,12 @@ def main():
             open(path, "w").write(v + "\n")
             print(f"{doc} has no generated block `{k}`: wrote {path}", file=sys.stderr)
     open(doc, "w").write(text)
-    if netns:
-        svg = os.path.join(os.path.dirname(doc) or ".", "faults_netns.svg")
-        open(svg, "w").write(netns_svg(netns))
-        print(f"wrote {svg}", file=sys.stderr)
+    for on, name in [(False, "faults_netns.svg"), (True, "faults_netns_secure.svg")]:
+        rs = [r for r in netns if bool(r.get("secure")) == on]
+        if rs:
+            svg = os.path.join(os.path.dirname(doc) or ".", name)
+            open(svg, "w").write(netns_svg(rs))
+            print(f"wrote {svg}", file=sys.stderr)
 
 
 if __name__ == "__main__":

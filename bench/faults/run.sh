@@ -20,6 +20,11 @@
 # around them stays. A section without such a block in the doc is written to
 # bench/faults/out/KEY.md instead.
 #
+# SECURE=both (default) runs every selection twice, security off then on
+# (TENDING_FAULTS_SECURE=1: every process with its own enclave, enforced; the hostile node
+# an outsider without one), and report.py puts the two side by side; SECURE=0 or SECURE=1
+# runs one mode.
+#
 # Every cargo command runs under `nice -n 19` (the machine is shared with trainings).
 set -euo pipefail
 cd "$(dirname "$0")/../.."
@@ -44,27 +49,35 @@ done
 nice -n 19 cargo build --release -p tending --bin tending
 nice -n 19 cargo build --release -p sim-bridge -p robot-node --bins
 start=$(date +%s)
-for s in "${sel[@]}"; do
-    case "$s" in
-        netns) t=faults_netns
-            n=$(( $(tr ',' '\n' <<<"$TENDING_NETNS_CASES" | wc -l) * $(tr ',' '\n' <<<"$TENDING_NETNS_SEEDS" | wc -l) ))
-            echo "netns: $n runs of $TENDING_NETNS_S s (cases $TENDING_NETNS_CASES; seeds $TENDING_NETNS_SEEDS)" ;;
-        restart) t=faults_bridge_restart ;;
-        hostile) t=faults_hostile ;;
-        kill)
-            cases="${TENDING_KILL_CASES:-0:12,1:8,1:14,2:11,2:20,3:9,4:13,4:19,5:16,5:23}"
-            echo "== faults_kill ($(( $(date +%s) - start )) s): cases $cases"
-            : > "$out/faults_kill.log"
-            for c in ${cases//,/ }; do
-                TENDING_KILL_SEED="${c%%:*}" TENDING_KILL_AT_S="${c##*:}" \
-                    nice -n 19 cargo test --release -p sim-bridge --test faults_kill -- --nocapture 2>&1 \
-                    | tee -a "$out/faults_kill.log" | grep --line-buffered -E "killed .* after the start|^test result|panicked" || true
-            done
-            continue ;;
-    esac
-    echo "== $t ($(( $(date +%s) - start )) s)"
-    nice -n 19 cargo test --release -p sim-bridge --test "$t" -- --nocapture 2>&1 \
-        | tee "$out/$t.log" | grep --line-buffered -E "^RUN |^test result|panicked" || true
+case "${SECURE:-both}" in
+    both) modes=(0 1) ;; 0|1) modes=("$SECURE") ;;
+    *) echo "SECURE must be both, 0 or 1" >&2; exit 2 ;;
+esac
+for mode in "${modes[@]}"; do
+    export TENDING_FAULTS_SECURE="$mode"
+    echo "#### DDS Security $([ "$mode" = 1 ] && echo on || echo off)"
+    for s in "${sel[@]}"; do
+        case "$s" in
+            netns) t=faults_netns
+                n=$(( $(tr ',' '\n' <<<"$TENDING_NETNS_CASES" | wc -l) * $(tr ',' '\n' <<<"$TENDING_NETNS_SEEDS" | wc -l) ))
+                echo "netns: $n runs of $TENDING_NETNS_S s (cases $TENDING_NETNS_CASES; seeds $TENDING_NETNS_SEEDS)" ;;
+            restart) t=faults_bridge_restart ;;
+            hostile) t=faults_hostile ;;
+            kill)
+                cases="${TENDING_KILL_CASES:-0:12,1:8,1:14,2:11,2:20,3:9,4:13,4:19,5:16,5:23}"
+                echo "== faults_kill ($(( $(date +%s) - start )) s): cases $cases"
+                : > "$out/faults_kill_$mode.log"
+                for c in ${cases//,/ }; do
+                    TENDING_KILL_SEED="${c%%:*}" TENDING_KILL_AT_S="${c##*:}" \
+                        nice -n 19 cargo test --release -p sim-bridge --test faults_kill -- --nocapture 2>&1 \
+                        | tee -a "$out/faults_kill_$mode.log" | grep --line-buffered -E "killed .* after the start|^test result|panicked" || true
+                done
+                continue ;;
+        esac
+        echo "== $t ($(( $(date +%s) - start )) s)"
+        nice -n 19 cargo test --release -p sim-bridge --test "$t" -- --nocapture 2>&1 \
+            | tee "$out/${t}_$mode.log" | grep --line-buffered -E "^RUN |^test result|panicked" || true
+    done
 done
 python3 bench/faults/report.py "$rep" docs/bench/faults.md "$out"
 echo "done in $(( $(date +%s) - start )) s"

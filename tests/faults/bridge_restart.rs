@@ -23,6 +23,8 @@ fn robots_stop_within_the_stale_timeout_and_resume_after_a_bridge_restart() {
         c.arg("record")
             .arg(&dir)
             .args(["--domain-id", &domain.to_string(), "--duration", "60"]);
+        // (`tending record`'s default enclave is the recorder's)
+        security_env(&mut c, keystore::RECORDER_ENCLAVE, keystore::Role::Recorder);
         Proc::spawn("record", c)
     };
     let mut robots: Vec<Proc> = (0..2)

@@ -54,6 +54,11 @@ fn run_fleet(domain: u16, seed: u64, kill_at: f64, dir: &Path) -> (u64, String) 
     if let Ok(t) = std::env::var("TENDING_KILL_CMD_TIMEOUT_S") {
         cmd.args(["--cmd-vel-timeout", &t]);
     }
+    if secure() {
+        cmd.arg("--secure")
+            .arg("--keystore")
+            .arg(fault_keystore().root());
+    }
     let mut child = cmd
         .args(["--duration", &format!("{}", kill_at + 6.0)])
         .args(["--domain", &domain.to_string()])

@@ -1,5 +1,10 @@
 //! Shared helpers of the fault tests: processes that are killed when dropped, JSON lines
-//! from a child's stdout, RSS, bag analysis.
+//! from a child's stdout, RSS, bag analysis, and security on or off.
+//!
+//! `TENDING_FAULTS_SECURE=1` runs every process of a fault test with DDS Security, each with
+//! its own enclave from one keystore per test binary, enforced, as `tending fleet --secure`
+//! runs them (the fleet-level tests pass `--secure`); every REPORT line says `"secure"`.
+//! bench/faults/run.sh runs the suite both ways side by side.
 #![allow(dead_code)]
 
 use std::io::{BufRead, BufReader};
@@ -144,12 +149,64 @@ pub fn robot_size_args(setup: &str, seed: u64) -> Vec<String> {
     ]
 }
 
+/// Whether this run of the fault tests has DDS Security on (`TENDING_FAULTS_SECURE=1`).
+pub fn secure() -> bool {
+    std::env::var("TENDING_FAULTS_SECURE").is_ok_and(|v| v == "1")
+}
+
+/// This test binary's keystore (created on first use in the temp directory).
+pub fn fault_keystore() -> &'static keystore::Keystore {
+    static KS: std::sync::OnceLock<keystore::Keystore> = std::sync::OnceLock::new();
+    KS.get_or_init(|| {
+        let root = std::env::temp_dir().join(format!("tending-faults-ks-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&root);
+        let ks = keystore::Keystore::create(&root).expect("creating the fault tests' keystore");
+        let v = keystore::Validity::days_from_now(1);
+        ks.create_enclave(keystore::BRIDGE_ENCLAVE, &keystore::Role::Bridge, v)
+            .expect("the bridge's enclave");
+        ks
+    })
+}
+
+/// With security on: `c` runs with DDS Security enforced and `enclave` (created for
+/// `role` if missing) in its keystore; the caller names the enclave on its command line.
+/// Returns whether security is on.
+pub fn security_env(c: &mut Command, enclave: &str, role: keystore::Role) -> bool {
+    if !secure() {
+        return false;
+    }
+    let ks = fault_keystore();
+    if !ks.enclave_dir(enclave).join("permissions.p7s").is_file() {
+        ks.create_enclave(enclave, &role, keystore::Validity::days_from_now(1))
+            .unwrap_or_else(|e| panic!("enclave {enclave}: {e:#}"));
+    }
+    c.env("ROS_SECURITY_KEYSTORE", ks.root())
+        .env("ROS_SECURITY_ENABLE", "true")
+        .env("ROS_SECURITY_STRATEGY", "Enforce");
+    true
+}
+
+/// [`security_env`] for a ROS 2 node, after its `--ros-args`: `--enclave ENCLAVE`.
+fn with_enclave(c: &mut Command, enclave: &str, role: keystore::Role) {
+    if security_env(c, enclave, role) {
+        c.args(["--enclave", enclave]);
+    }
+}
+
 /// A robot_node command for `name` on `domain` (stats as JSON lines every second).
 pub fn robot_cmd(name: &str, domain: u16, setup: &str, extra: &[&str]) -> Command {
     let mut c = Command::new(bin("robot_node"));
-    c.env("ROS_DOMAIN_ID", domain.to_string())
-        .args(["--ros-args", "-r", &format!("__ns:=/{name}")])
-        .args(["-p", "stale_timeout_s:=1.0", "-p", "stats_json:=true"])
+    c.env("ROS_DOMAIN_ID", domain.to_string()).args([
+        "--ros-args",
+        "-r",
+        &format!("__ns:=/{name}"),
+    ]);
+    with_enclave(
+        &mut c,
+        &keystore::robot_enclave(name),
+        keystore::Role::Robots(vec![name.to_string()]),
+    );
+    c.args(["-p", "stale_timeout_s:=1.0", "-p", "stats_json:=true"])
         .args(["-p", "stats_period_s:=1.0"]);
     for a in robot_size_args(setup, 0) {
         c.args(["-p", &a]);
@@ -163,9 +220,19 @@ pub fn robot_cmd(name: &str, domain: u16, setup: &str, extra: &[&str]) -> Comman
 /// A realtime sim_bridge command.
 pub fn bridge_cmd(domain: u16, setup: &str, extra: &[&str]) -> Command {
     let mut c = Command::new(bin("sim_bridge"));
-    c.env("ROS_DOMAIN_ID", domain.to_string())
-        .args(["--ros-args", "-p", &format!("setup:={setup}")])
-        .args(["-p", "seed:=0", "-p", "stale_timeout_s:=2.0"]);
+    c.env("ROS_DOMAIN_ID", domain.to_string()).arg("--ros-args");
+    with_enclave(&mut c, keystore::BRIDGE_ENCLAVE, keystore::Role::Bridge);
+    // A secure handshake under load takes seconds (docs/bench/security.md): the bridge
+    // waits for the robots as `tending fleet --secure` has it wait.
+    if secure() {
+        c.args(["-p", "startup_grace_s:=30.0"]);
+    }
+    c.args(["-p", &format!("setup:={setup}")]).args([
+        "-p",
+        "seed:=0",
+        "-p",
+        "stale_timeout_s:=2.0",
+    ]);
     for e in extra {
         c.args(["-p", e]);
     }
@@ -181,8 +248,12 @@ pub fn num(v: &serde_json::Value, path: &str) -> f64 {
     x.as_f64().unwrap_or(f64::NAN)
 }
 
-/// Append one JSON line to `$TENDING_FAULTS_REPORT` (bench/faults/run.sh collects them).
-pub fn report(v: serde_json::Value) {
+/// Append one JSON line to `$TENDING_FAULTS_REPORT` (bench/faults/run.sh collects them),
+/// with `"secure"`: whether DDS Security was on.
+pub fn report(mut v: serde_json::Value) {
+    if let Some(o) = v.as_object_mut() {
+        o.insert("secure".into(), secure().into());
+    }
     eprintln!("REPORT {v}");
     if let Ok(path) = std::env::var("TENDING_FAULTS_REPORT") {
         use std::io::Write;
