@@ -5,7 +5,12 @@
 //!   spinning thread the other);
 //! - N envs by rayon's `par_iter` entered from outside its pool (VecEnv's previous path).
 //!
-//!   cargo run --release -p sim --example vec_scaling -- [SETUP] [N_ENVS] [SECONDS]
+//!   cargo run --release -p sim --example vec_scaling -- [SETUP] [N_ENVS] [SECONDS] [ROUNDS]
+//!
+//! With ROUNDS > 1 (a shared, noisy machine) one env, the loop and VecEnv are measured in
+//! turn, SECONDS each, ROUNDS times, and each ratio is reported as the median over the
+//! rounds of that round's ratio (neighbours' load drifts over seconds, so a ratio of two
+//! measurements taken seconds apart is noisier than the median of adjacent pairs).
 use obs::ObsBatch;
 use rand::{Rng, SeedableRng};
 use rayon::prelude::*;
@@ -45,6 +50,7 @@ fn main() {
     let setup: Setup = args.get(1).map_or("6.4_2", |s| s).parse().expect("SETUP");
     let n_envs: usize = args.get(2).map_or(32, |s| s.parse().expect("N_ENVS"));
     let secs: f64 = args.get(3).map_or(2.0, |s| s.parse().expect("SECONDS"));
+    let rounds: usize = args.get(4).map_or(1, |s| s.parse().expect("ROUNDS"));
     let cfg = ScenarioConfig::default();
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(7);
     let r = setup.robots;
@@ -57,19 +63,46 @@ fn main() {
 
     let mut one = Env::new(cfg.clone(), setup, 1).expect("env");
     let mut out = ObsBatch::default();
-    let single = rate(secs, |i| step_one(&mut one, &p1[i % 64], &mut out, i)) * r as f64;
-
     let (mut envs, mut outs) = (new_envs(), vec![ObsBatch::default(); n_envs]);
-    let looped = rate(secs, |i| {
-        for (e, (env, o)) in envs.iter_mut().zip(outs.iter_mut()).enumerate() {
-            step_one(env, &pn[i % 64][e * r..(e + 1) * r], o, i);
-        }
-    }) * (r * n_envs) as f64;
-
     let mut v = VecEnv::new(cfg.clone(), setup, n_envs, 1).expect("VecEnv");
-    let forked = rate(secs, |i| {
-        v.step_actions_observe(&pn[i % 64], &mut out).expect("step");
-    }) * (r * n_envs) as f64;
+    let (mut singles, mut loops, mut forks) = (vec![], vec![], vec![]);
+    for _ in 0..rounds.max(1) {
+        singles.push(rate(secs, |i| step_one(&mut one, &p1[i % 64], &mut out, i)) * r as f64);
+        loops.push(
+            rate(secs, |i| {
+                for (e, (env, o)) in envs.iter_mut().zip(outs.iter_mut()).enumerate() {
+                    step_one(env, &pn[i % 64][e * r..(e + 1) * r], o, i);
+                }
+            }) * (r * n_envs) as f64,
+        );
+        forks.push(
+            rate(secs, |i| {
+                v.step_actions_observe(&pn[i % 64], &mut out).expect("step");
+            }) * (r * n_envs) as f64,
+        );
+    }
+    let median = |mut x: Vec<f64>| {
+        x.sort_by(f64::total_cmp);
+        x[x.len() / 2]
+    };
+    let ratio = |a: &[f64], b: &[f64]| median(a.iter().zip(b).map(|(a, b)| a / b).collect());
+    if rounds > 1 {
+        println!(
+            "{setup} x {n_envs} envs, {rounds} rounds of {secs} s, medians of per-round ratios: \
+             loop/1 env {:.2}x | VecEnv/1 env {:.2}x | VecEnv/loop {:.2}x (VecEnv/1 env per round: {})",
+            ratio(&loops, &singles),
+            ratio(&forks, &singles),
+            ratio(&forks, &loops),
+            forks
+                .iter()
+                .zip(&singles)
+                .map(|(f, s)| format!("{:.2}", f / s))
+                .collect::<Vec<_>>()
+                .join(" ")
+        );
+        return;
+    }
+    let (single, looped, forked) = (singles[0], loops[0], forks[0]);
 
     let rayon_ext = rate(secs, |i| {
         envs.par_iter_mut()
