@@ -191,22 +191,12 @@ fn a_cyclone_peer_with_another_cas_certificate_is_refused_both_ways() {
     assert!(r.refused.is_none(), "its own enclave is valid:\n{}", r.log);
     assert!(robot_got > 0, "control: robot_0 read no poses");
     assert!(recorder_got > 0, "control: the recorder read no poses");
-    assert!(
-        b.cmds.contains(&0.1),
-        "control: no command of robot_0 reached the bridge"
-    );
-    assert_eq!(r.read, 0, "a Cyclone peer of another CA read poses");
-    assert!(
-        !b.cmds.contains(&-9.0),
-        "a Cyclone peer of another CA commanded robot_0"
-    );
     // Our side: the recorder refused its certificate.
-    let ours = our_log(&r.guid, "Replying to a handshake request failed");
-    assert!(
-        !ours.is_empty(),
-        "no refusal of {} in our log:\n{}",
-        r.guid,
-        r.log
+    let ours = kept_out(
+        &r,
+        &b,
+        "a Cyclone peer of another CA",
+        "Replying to a handshake request failed",
     );
     eprintln!(
         "our side refused it {} times, e.g.: {}",

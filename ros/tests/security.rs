@@ -13,6 +13,8 @@
 //!   meet it: it reads nothing and its `cmd_vel` reaches nobody (the rustdds fix in
 //!   docs/upstream/rustdds/0004-*).
 
+mod forged;
+
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
@@ -189,17 +191,8 @@ fn a_robot_enclave_cannot_write_another_robots_cmd_vel() {
 fn a_stolen_identity_with_self_signed_permissions_is_refused_by_the_bridge() {
     let (root, ks) = keystore("stolen");
     let (root2, attacker) = keystore("attacker");
-    let forged = attacker
-        .create_enclave(
-            "/tending/robot_0",
-            &Role::Robots(vec!["robot_0".into(), "robot_1".into()]),
-            Validity::days_from_now(1),
-        )
-        .unwrap();
-    let real = ks.enclave_dir("/tending/robot_0");
-    for f in ["cert.pem", "key.pem", "identity_ca.cert.pem"] {
-        std::fs::copy(real.join(f), forged.join(f)).unwrap();
-    }
+    let forged =
+        forged::stolen_identity(&ks, &attacker, "/tending/robot_0", &["robot_0", "robot_1"]);
     let d = domain(2);
     let (_bc, mut bridge) = participant(d, &enclave(&ks, keystore::BRIDGE_ENCLAVE), "sim_bridge");
     let (_rc, mut robot1) = participant(d, &enclave(&ks, "/tending/robot_1"), "robot_node");

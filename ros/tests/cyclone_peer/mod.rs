@@ -324,3 +324,23 @@ pub fn bridge_with_peer(
     }
     unreachable!()
 }
+
+/// The peer (`who`, writing -9.0) was kept out while a control of ours commanded 0.1: the
+/// control's commands reached the bridge, the peer read no pose and none of its commands
+/// arrived, and our log names its GUID with `our_refusal`. Returns those log lines.
+pub fn kept_out(r: &PeerResult, b: &BridgeSide, who: &str, our_refusal: &str) -> Vec<String> {
+    assert!(
+        b.cmds.contains(&0.1),
+        "control: no command of ours reached the bridge"
+    );
+    assert_eq!(r.read, 0, "{who} read poses");
+    assert!(!b.cmds.contains(&-9.0), "{who} commanded the robot");
+    let ours = our_log(&r.guid, our_refusal);
+    assert!(
+        !ours.is_empty(),
+        "no refusal of {} in our log:\n{}",
+        r.guid,
+        r.log
+    );
+    ours
+}
