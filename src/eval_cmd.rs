@@ -1,7 +1,7 @@
 //! `tending eval`: a checkpoint (or a scripted baseline) over setups and seeds, reported
 //! as the paper does: per seed the mean over its episodes, then mean (std) over seeds.
 
-use crate::controller::CheckpointFlags;
+use crate::method::CheckpointFlags;
 use crate::records::{self, EvalResultRecord};
 use crate::report::{self, Numbers};
 use crate::stats::markdown_table;
@@ -88,7 +88,7 @@ impl Runs {
 }
 
 pub fn run(a: EvalArgs) -> Result<()> {
-    let margins = crate::controller::margins(&a.margins)?;
+    let margins = crate::method::margins(&a.margins)?;
     let (ctrl, label) = match (&a.checkpoint, a.policy.as_deref()) {
         (Some(p), None) => {
             let flags = CheckpointFlags {
@@ -97,16 +97,16 @@ pub fn run(a: EvalArgs) -> Result<()> {
                 orca_filter: (a.orca_filter || a.no_orca_filter).then_some(a.orca_filter),
                 margins: margins.filter,
             };
-            crate::controller::checkpoint(p, &flags)?
+            crate::method::checkpoint(p, &flags)?
         }
-        (None, Some(name)) => crate::controller::scripted(name, &margins)?,
+        (None, Some(name)) => crate::method::scripted(name, &margins)?,
         (None, None) => bail!(
             "pass --checkpoint <file> or --policy {}",
-            crate::controller::SCRIPTS
+            crate::method::SCRIPTS
         ),
         (Some(_), Some(_)) => bail!("--checkpoint and --policy are exclusive"),
     };
-    let mode = crate::controller::mode(&ctrl);
+    let mode = crate::method::mode(&ctrl);
     let cfg = crate::sim_cmd::load_config(&a.scenario)?;
     let (setups, seeds) = a.runs.parse()?;
     let episodes = a.runs.episodes;

@@ -3,13 +3,13 @@
 //! runner ([`policy::train::run_episode_watched`]), so for the same setup, seed and
 //! controller both commands report the same numbers.
 
-use crate::controller::CheckpointFlags;
+use crate::method::CheckpointFlags;
 use crate::render::Frame;
 use crate::report::{self, Numbers};
 use crate::stats::markdown_table;
 use anyhow::{bail, Context, Result};
 use clap::Args;
-use policy::train::{evaluate, run_episode_watched, Controller};
+use policy::train::{evaluate, run_episode_watched, Method};
 use sim::{Env, Metrics, ScenarioConfig, Setup};
 use std::path::PathBuf;
 
@@ -61,10 +61,10 @@ pub fn load_config(path: &Option<PathBuf>) -> Result<ScenarioConfig> {
 }
 
 /// The controller the arguments name, and its label for the table.
-fn controller(a: &SimArgs) -> Result<(Controller, String)> {
-    let margins = crate::controller::margins(&a.margins)?;
+fn controller(a: &SimArgs) -> Result<(Method, String)> {
+    let margins = crate::method::margins(&a.margins)?;
     let Some(path) = &a.checkpoint else {
-        return crate::controller::scripted(&a.policy, &margins);
+        return crate::method::scripted(&a.policy, &margins);
     };
     let flags = CheckpointFlags {
         sample: a.sample,
@@ -72,7 +72,7 @@ fn controller(a: &SimArgs) -> Result<(Controller, String)> {
         orca_filter: a.orca_filter.then_some(true),
         margins: margins.filter,
     };
-    crate::controller::checkpoint(path, &flags)
+    crate::method::checkpoint(path, &flags)
 }
 
 /// The table row of one policy on one setup: mean (std) over episodes.
@@ -157,21 +157,18 @@ mod tests {
         std::fs::create_dir_all(&dir).unwrap();
         let gif = dir.join("ep.gif");
         for (flags, ctrl) in [
-            (vec!["--policy", "random"], Controller::Random),
-            (vec!["--policy", "greedy"], Controller::Greedy),
-            (vec!["--policy", "greedy-orca"], Controller::greedy_orca()),
-            (
-                vec!["--policy", "matching-orca"],
-                Controller::matching_orca(),
-            ),
+            (vec!["--policy", "random"], Method::Random),
+            (vec!["--policy", "greedy"], Method::Greedy),
+            (vec!["--policy", "greedy-orca"], Method::greedy_orca()),
+            (vec!["--policy", "matching-orca"], Method::matching_orca()),
             (
                 vec!["--checkpoint", &moves],
-                Controller::learned(actor(&moves), false),
+                Method::learned(actor(&moves), false),
             ),
             // trained behind the ORCA filter: run behind it, as eval and robot_node do
             (
                 vec!["--checkpoint", &bundled],
-                Controller::filtered(actor(&bundled), false),
+                Method::filtered(actor(&bundled), false),
             ),
         ] {
             let mut v = vec!["--setup", "4.2_2", "--seed", "7", "--episodes", "3"];

@@ -5,7 +5,7 @@
 //!
 //! cargo run --release -p policy --features train --example contact_sites -- CHECKPOINT|greedy-orca SETUP [EPISODES] [SEED]
 
-use policy::train::eval::{run_episode_watched, Controller};
+use policy::train::eval::{run_episode_watched, Method};
 use sim::{ScenarioConfig, Setup};
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
@@ -16,7 +16,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let setup: Setup = setup.parse().map_err(|e| format!("SETUP {setup}: {e}"))?;
     let episodes: u64 = args.get(2).map_or(Ok(20), |s| s.parse())?;
     let seed: u64 = args.get(3).map_or(Ok(7), |s| s.parse())?;
-    let ctrl = Controller::script_or_filtered_checkpoint(ck)?;
+    let ctrl = Method::script_or_filtered_checkpoint(ck)?;
     let cfg = ScenarioConfig::default();
     let touch = cfg.task.collision_distance;
     let mut prev_vel: Vec<[f32; 2]> = vec![];

@@ -23,7 +23,7 @@
 //! (`TRACE=1`: each late cycle's matched robot and its distance in steps, step by step, `s`
 //! where it did not move; `SCENE=EPISODE,ROBOT,FROM,TO`: that robot's surroundings)
 
-use policy::train::eval::{run_episode_hooked, Controller};
+use policy::train::eval::{run_episode_hooked, Method};
 use sim::{ScenarioConfig, Setup};
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
@@ -34,7 +34,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let setup: Setup = setup.parse().map_err(|e| format!("SETUP {setup}: {e}"))?;
     let episodes: u64 = args.get(2).map_or(Ok(10), |s| s.parse())?;
     let seed: u64 = args.get(3).map_or(Ok(0), |s| s.parse())?;
-    let ctrl = Controller::script_or_filtered_checkpoint(ck)?;
+    let ctrl = Method::script_or_filtered_checkpoint(ck)?;
     let cfg = ScenarioConfig::default();
     // [first, at-box, en-route, none-free]
     let mut waits = [0u64; 4];

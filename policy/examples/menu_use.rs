@@ -6,7 +6,7 @@
 //! cargo run --release -p policy --features train --example menu_use -- CHECKPOINT SETUP [EPISODES]
 
 use plan::targets::{TargetAction, N_TARGET_ACTIONS};
-use policy::train::eval::{run_episode_hooked, Controller};
+use policy::train::eval::{run_episode_hooked, Method};
 use sim::{ScenarioConfig, Setup};
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
@@ -18,8 +18,8 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let episodes: u64 = args.get(2).map_or(Ok(10), |s| s.parse())?;
     // "greedy-orca" instead of a checkpoint: the script, for its share of robots carrying
     // (every robot-step counts as the "greedy" entry).
-    let ctrl = Controller::script_or_filtered_checkpoint(ck)?;
-    if let Controller::Learned { actor, .. } = &ctrl {
+    let ctrl = Method::script_or_filtered_checkpoint(ck)?;
+    if let Method::Learned { actor, .. } = &ctrl {
         if !plan::targets::menu_size_ok(actor.arch.n_actions) {
             return Err(format!("{ck}: not a target-action policy").into());
         }
@@ -39,7 +39,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             0,
             ep,
             |env| {
-                if matches!(ctrl, Controller::GreedyOrca { .. }) {
+                if matches!(ctrl, Method::GreedyOrca { .. }) {
                     env.observe(&mut o);
                     for r in 0..o.rows {
                         script[usize::from(o.own_row(r)[2] > 0.5)] += 1;

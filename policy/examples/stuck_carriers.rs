@@ -8,7 +8,7 @@
 //! cargo run --release -p policy --features train --example stuck_carriers -- CHECKPOINT|greedy-orca SETUPS [EPISODES] [SEED]
 //! (`STUCK_VERBOSE=1`: print each stop's episode, robot, first step and position)
 
-use policy::train::eval::{run_episode_hooked, Controller};
+use policy::train::eval::{run_episode_hooked, Method};
 use sim::{ScenarioConfig, Setup};
 
 const MIN_STEPS: u32 = 40;
@@ -24,7 +24,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let seed: u64 = args.get(3).map_or(Ok(0), |s| s.parse())?;
     // STUCK_VERBOSE=1: where and when each stop began
     let verbose = std::env::var_os("STUCK_VERBOSE").is_some();
-    let ctrl = Controller::script_or_filtered_checkpoint(ck)?;
+    let ctrl = Method::script_or_filtered_checkpoint(ck)?;
     let cfg = ScenarioConfig::default();
     for s in setups.split(',') {
         let setup: Setup = s.parse().map_err(|e| format!("SETUPS {s}: {e}"))?;

@@ -4,26 +4,26 @@
 #![cfg(feature = "train")]
 
 use policy::train::eval::eval_env_seed;
-use policy::train::{evaluate, Controller};
+use policy::train::{evaluate, Method};
 use policy::Policy;
 use sim::{parts_bound, Env, ScenarioConfig, Setup};
 
-fn bundled() -> Controller {
+fn bundled() -> Method {
     let path = concat!(
         env!("CARGO_MANIFEST_DIR"),
         "/pretrained/smappo_6.4_2.safetensors"
     );
     let pol = Policy::load(path).expect("bundled policy");
     assert!(pol.trained_with_orca_filter());
-    Controller::filtered(Box::new(pol.actor().clone()), false)
+    Method::filtered(Box::new(pol.actor().clone()), false)
 }
 
 #[test]
 fn no_controller_delivers_more_than_the_bound() {
     let cfg = ScenarioConfig::default();
     let controllers = [
-        ("greedy", Controller::Greedy),
-        ("greedy-orca", Controller::greedy_orca()),
+        ("greedy", Method::Greedy),
+        ("greedy-orca", Method::greedy_orca()),
         ("bundled policy", bundled()),
     ];
     let mut tighter = 0;

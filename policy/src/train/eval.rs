@@ -17,9 +17,11 @@ use rayon::prelude::*;
 use sim::baselines::{fleet_params, random_action, GreedyOrcaFleet};
 use sim::{episode_seed, Env, Metrics, ScenarioConfig, Setup};
 
-/// Who picks the actions.
+/// What an offline episode runs: a scripted method or a checkpoint, described, not yet
+/// running (`run_episode` builds one stateful pilot or planner per robot from it). On the
+/// robot, robot_node's `Controller` trait is the running counterpart, one per robot.
 #[derive(Debug, Clone)]
-pub enum Controller {
+pub enum Method {
     /// A trained actor (argmax actions unless `sample`) through its pilot, behind the
     /// one-step action shield, the ORCA filter or neither (`safety`).
     Learned {
@@ -43,11 +45,11 @@ pub enum Controller {
     Random,
 }
 
-impl Controller {
+impl Method {
     /// Greedy-ORCA at its own clearance and obstacle horizon
     /// (`plan::orca::GREEDY_ORCA_CLEARANCE`, `plan::orca::OBSTACLE_HORIZON`).
     pub fn greedy_orca() -> Self {
-        Controller::GreedyOrca {
+        Method::GreedyOrca {
             clearance: GREEDY_ORCA_CLEARANCE,
             obstacle_horizon: OBSTACLE_HORIZON,
         }
@@ -55,14 +57,14 @@ impl Controller {
 
     /// matching-ORCA behind the ORCA filter as it is deployed.
     pub fn matching_orca() -> Self {
-        Controller::MatchingOrca {
+        Method::MatchingOrca {
             margins: FilterMargins::DEPLOYED,
         }
     }
 
     /// `actor` as it is, no safety layer.
     pub fn learned(actor: Box<Actor>, sample: bool) -> Self {
-        Controller::Learned {
+        Method::Learned {
             actor,
             sample,
             safety: Safety::RAW,
@@ -71,7 +73,7 @@ impl Controller {
 
     /// `actor` behind the one-step action shield (`plan::shield`).
     pub fn shielded(actor: Box<Actor>, sample: bool) -> Self {
-        Controller::Learned {
+        Method::Learned {
             actor,
             sample,
             safety: Safety {
@@ -83,7 +85,7 @@ impl Controller {
 
     /// `actor` behind the ORCA filter as it is deployed ([`FilterMargins::DEPLOYED`]).
     pub fn filtered(actor: Box<Actor>, sample: bool) -> Self {
-        Controller::Learned {
+        Method::Learned {
             actor,
             sample,
             safety: Safety::filtered(FilterMargins::DEPLOYED),
@@ -113,7 +115,7 @@ pub fn eval_env_seed(seed: u64, episode: u64) -> u64 {
 
 /// One episode of `setup`, deterministic in (seed, episode).
 pub fn run_episode(
-    ctrl: &Controller,
+    ctrl: &Method,
     cfg: &ScenarioConfig,
     setup: Setup,
     seed: u64,
@@ -125,7 +127,7 @@ pub fn run_episode(
 /// [`run_episode`], showing `on_step` the environment at the start and after every step
 /// (`tending sim --render` draws them).
 pub fn run_episode_watched(
-    ctrl: &Controller,
+    ctrl: &Method,
     cfg: &ScenarioConfig,
     setup: Setup,
     seed: u64,
@@ -141,7 +143,7 @@ pub fn run_episode_watched(
 /// empty; greedy-ORCA chooses no discrete action and never calls it).
 /// `policy/examples/menu_use.rs` counts menu entries with it.
 pub fn run_episode_hooked(
-    ctrl: &Controller,
+    ctrl: &Method,
     cfg: &ScenarioConfig,
     setup: Setup,
     seed: u64,
@@ -191,7 +193,7 @@ enum Driver {
 }
 
 impl Driver {
-    fn new(ctrl: &Controller, env: &Env) -> Result<Self, TrainError> {
+    fn new(ctrl: &Method, env: &Env) -> Result<Self, TrainError> {
         let fleet = fleet_params(env.sizes(), env.config());
         let n = env.n_robots();
         let pilots = |outputs, safety| -> Result<Vec<Pilot>, TrainError> {
@@ -199,9 +201,9 @@ impl Driver {
             Ok(vec![one; n])
         };
         Ok(match ctrl {
-            Controller::Random => Driver::Random,
-            Controller::Greedy => Driver::Greedy(fleet.greedy_params()),
-            Controller::GreedyOrca {
+            Method::Random => Driver::Random,
+            Method::Greedy => Driver::Greedy(fleet.greedy_params()),
+            Method::GreedyOrca {
                 clearance,
                 obstacle_horizon,
             } => Driver::GreedyOrca(GreedyOrcaFleet::with_margins(
@@ -209,11 +211,11 @@ impl Driver {
                 *clearance,
                 *obstacle_horizon,
             )?),
-            Controller::MatchingOrca { margins } => Driver::Piloted {
+            Method::MatchingOrca { margins } => Driver::Piloted {
                 decider: Decider::Entry(MatchingOrca::ENTRY as u8),
                 pilots: pilots(Outputs::Targets, Safety::filtered(*margins))?,
             },
-            Controller::Learned {
+            Method::Learned {
                 actor,
                 sample,
                 safety,
@@ -311,7 +313,7 @@ impl ActorRun {
 /// Episodes `0..episodes` of `setup` under `seed`, in parallel; results in episode order
 /// (identical whatever the thread count).
 pub fn evaluate(
-    ctrl: &Controller,
+    ctrl: &Method,
     cfg: &ScenarioConfig,
     setup: Setup,
     seed: u64,

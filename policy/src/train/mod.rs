@@ -15,7 +15,7 @@ pub mod trainer;
 pub mod valuenorm;
 
 pub use config::TrainConfig;
-pub use eval::{evaluate, run_episode, run_episode_watched, Controller};
+pub use eval::{evaluate, run_episode, run_episode_watched, Method};
 pub use randomize::SetupRange;
 pub use trainer::{format_curriculum, parse_curriculum, Stage, TrainError, Trainer, UpdateStats};
 pub use valuenorm::ValueNorm;

@@ -156,7 +156,7 @@ fn short_training_improves_reward() {
     )
     .unwrap();
     let eval = |t: &Trainer| {
-        let ctrl = Controller::learned(Box::new(t.actor.clone()), true);
+        let ctrl = Method::learned(Box::new(t.actor.clone()), true);
         let ms = evaluate(&ctrl, &sc, setup, 1234, 16).unwrap();
         let r = ms.iter().map(|m| m.total_reward).sum::<f64>() / ms.len() as f64;
         let mu = ms.iter().map(|m| m.utilization()).sum::<f64>() / ms.len() as f64;
@@ -177,15 +177,15 @@ fn short_training_improves_reward() {
 fn evaluation_is_deterministic() {
     let sc = ScenarioConfig::default();
     let setup = Setup::new(3, 2, 2);
-    let a = evaluate(&Controller::Greedy, &sc, setup, 0, 4).unwrap();
-    let b = evaluate(&Controller::Greedy, &sc, setup, 0, 4).unwrap();
+    let a = evaluate(&Method::Greedy, &sc, setup, 0, 4).unwrap();
+    let b = evaluate(&Method::Greedy, &sc, setup, 0, 4).unwrap();
     assert_eq!(a, b);
-    let r = evaluate(&Controller::Random, &sc, setup, 0, 4).unwrap();
+    let r = evaluate(&Method::Random, &sc, setup, 0, 4).unwrap();
     let g_mu: f64 = a.iter().map(|m| m.utilization()).sum();
     let r_mu: f64 = r.iter().map(|m| m.utilization()).sum();
     assert!(g_mu > r_mu, "greedy {g_mu} vs random {r_mu}");
     let actor = crate::Actor::new(crate::ArchConfig::smappo(), 3);
-    let ctrl = Controller::learned(Box::new(actor), false);
+    let ctrl = Method::learned(Box::new(actor), false);
     let x = evaluate(&ctrl, &sc, setup, 5, 3).unwrap();
     let y = evaluate(&ctrl, &sc, setup, 5, 3).unwrap();
     assert_eq!(x, y);
@@ -728,8 +728,8 @@ fn diagonal_actions_train_and_evaluate() {
     let mut sc = ScenarioConfig::default();
     sc.world.episode_steps = 40;
     for ctrl in [
-        Controller::learned(Box::new(pol.actor().clone()), true),
-        Controller::shielded(Box::new(pol.actor().clone()), true),
+        Method::learned(Box::new(pol.actor().clone()), true),
+        Method::shielded(Box::new(pol.actor().clone()), true),
     ] {
         let m = run_episode(&ctrl, &sc, Setup::new(16, 4, 2), 0, 0).unwrap();
         assert_eq!(m.steps, 40);
@@ -765,7 +765,7 @@ fn target_actions_contain_greedy_orca() {
     let mut sc = ScenarioConfig::default();
     sc.world.episode_steps = 60;
     let setup = Setup::new(6, 4, 2);
-    let filtered = Controller::Learned {
+    let filtered = Method::Learned {
         actor: Box::new(always_greedy.clone()),
         sample: false,
         safety: plan::Safety::filtered(plan::FilterMargins {
@@ -794,10 +794,10 @@ fn target_actions_contain_greedy_orca() {
         let a = run_episode(&filtered, &sc, setup, 0, ep).unwrap();
         assert_eq!(a, script(ep), "episode {ep}");
     }
-    let raw = Controller::learned(Box::new(always_greedy), false);
+    let raw = Method::learned(Box::new(always_greedy), false);
     let m = run_episode(&raw, &sc, setup, 0, 0).unwrap();
     assert!(m.steps == 60 && m.parts_delivered > 0, "{m:?}");
-    let shielded = Controller::shielded(Box::new(pol.actor().clone()), false);
+    let shielded = Method::shielded(Box::new(pol.actor().clone()), false);
     let e = run_episode(&shielded, &sc, setup, 0, 0).unwrap_err();
     assert!(e.to_string().contains("target actions"), "{e}");
     for bad in [
@@ -826,12 +826,12 @@ fn always_entry(entry: plan::targets::TargetAction) -> Box<crate::Actor> {
 /// ORCA filter (what the stand-in checkpoint matching-ORCA once was evaluated as).
 #[test]
 fn matching_orca_is_the_always_matched_policy() {
-    let always = Controller::filtered(always_entry(plan::targets::TargetAction::Matched), false);
+    let always = Method::filtered(always_entry(plan::targets::TargetAction::Matched), false);
     let mut sc = ScenarioConfig::default();
     sc.world.episode_steps = 80;
     for setup in [Setup::new(6, 4, 2), Setup::new(12, 4, 1)] {
         for ep in 0..2 {
-            let a = run_episode(&Controller::matching_orca(), &sc, setup, 3, ep).unwrap();
+            let a = run_episode(&Method::matching_orca(), &sc, setup, 3, ep).unwrap();
             assert_eq!(
                 a,
                 run_episode(&always, &sc, setup, 3, ep).unwrap(),
@@ -852,12 +852,12 @@ fn matching_orca_is_the_always_matched_policy() {
 /// before and 4.8 after, against greedy-ORCA's 20.0.
 #[test]
 fn matched_storage_queue_unjams_few_storages() {
-    let matched = Controller::matching_orca();
-    let greedy = Controller::filtered(always_entry(plan::targets::TargetAction::Greedy), false);
+    let matched = Method::matching_orca();
+    let greedy = Method::filtered(always_entry(plan::targets::TargetAction::Greedy), false);
     let sc = ScenarioConfig::default();
     let setup = Setup::new(40, 40, 2);
     const EPISODES: u64 = 8;
-    let total = |c: &Controller| {
+    let total = |c: &Method| {
         (0..EPISODES).fold((0u32, 0u32), |(p, k), ep| {
             let m = run_episode(c, &sc, setup, 7, ep).unwrap();
             (p + m.parts_delivered, k + m.collisions)
@@ -865,7 +865,7 @@ fn matched_storage_queue_unjams_few_storages() {
     };
     let (pm, km) = total(&matched);
     let (pg, kg) = total(&greedy);
-    let (_, ko) = total(&Controller::greedy_orca());
+    let (_, ko) = total(&Method::greedy_orca());
     assert!(
         pm as f32 > 1.1 * pg as f32,
         "matched {pm} parts vs greedy {pg}"

@@ -1,9 +1,10 @@
-//! The controller `tending sim` and `tending eval` run: a scripted method by name, or a
-//! checkpoint with its safety-layer flags, and the label their tables show it under.
+//! The method `tending sim` and `tending eval` run (`policy::train::Method`): a scripted
+//! method by name, or a checkpoint with its safety-layer flags, and the label their tables
+//! show it under.
 
 use anyhow::{bail, Context, Result};
 use plan::{Deployment, FilterMargins, Margins, Safety, ScriptMargins};
-use policy::train::Controller;
+use policy::train::Method;
 use policy::Policy;
 use std::path::Path;
 
@@ -61,25 +62,25 @@ fn script_label(m: &ScriptMargins) -> String {
 /// its label. matching-ORCA runs behind the ORCA filter with the filter's margins,
 /// greedy-ORCA with its own (each named in the label when not the deployed ones); the
 /// others have none.
-pub fn scripted(name: &str, margins: &Margins) -> Result<(Controller, String)> {
+pub fn scripted(name: &str, margins: &Margins) -> Result<(Method, String)> {
     let g = margins.greedy_orca;
     Ok(match name {
-        "greedy" => (Controller::Greedy, name.into()),
-        "greedy-orca" if g.is_default() => (Controller::greedy_orca(), name.into()),
+        "greedy" => (Method::Greedy, name.into()),
+        "greedy-orca" if g.is_default() => (Method::greedy_orca(), name.into()),
         "greedy-orca" => (
-            Controller::GreedyOrca {
+            Method::GreedyOrca {
                 clearance: g.clearance,
                 obstacle_horizon: g.obstacle_horizon,
             },
             script_label(&g),
         ),
         "matching-orca" => (
-            Controller::MatchingOrca {
+            Method::MatchingOrca {
                 margins: margins.filter,
             },
             format!("{name}{}", margin_label(&margins.filter)),
         ),
-        "random" => (Controller::Random, name.into()),
+        "random" => (Method::Random, name.into()),
         o => bail!("unknown --policy `{o}`: expected {SCRIPTS}"),
     })
 }
@@ -89,7 +90,7 @@ pub fn scripted(name: &str, margins: &Margins) -> Result<(Controller, String)> {
 /// filter runs behind it (as it was trained and as robot_node runs it) unless the shield
 /// or `--no-orca-filter` says otherwise; a target-action policy says so in its label (its
 /// rows must not read as the paper's policy).
-pub fn checkpoint(path: &Path, f: &CheckpointFlags) -> Result<(Controller, String)> {
+pub fn checkpoint(path: &Path, f: &CheckpointFlags) -> Result<(Method, String)> {
     let pol = Policy::load(path).with_context(|| format!("--checkpoint {}", path.display()))?;
     let deployment = Deployment::Offline {
         trained_with_filter: pol.trained_with_orca_filter(),
@@ -113,7 +114,7 @@ pub fn checkpoint(path: &Path, f: &CheckpointFlags) -> Result<(Controller, Strin
             .and_then(|n| n.to_str())
             .unwrap_or("checkpoint")
     );
-    let ctrl = Controller::Learned {
+    let ctrl = Method::Learned {
         actor: Box::new(pol.actor().clone()),
         sample: f.sample,
         safety,
@@ -122,9 +123,9 @@ pub fn checkpoint(path: &Path, f: &CheckpointFlags) -> Result<(Controller, Strin
 }
 
 /// How a controller picks its actions, for the results' header.
-pub fn mode(ctrl: &Controller) -> &'static str {
+pub fn mode(ctrl: &Method) -> &'static str {
     match ctrl {
-        Controller::Learned { sample, safety, .. } => {
+        Method::Learned { sample, safety, .. } => {
             match (*sample, safety.shield, safety.filter.is_some()) {
                 (true, true, _) => "sampled shielded actions",
                 (false, true, _) => "argmax shielded actions",
