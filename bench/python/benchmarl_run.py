@@ -69,6 +69,13 @@ def main(argv=None):
     p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
                    help="any ExperimentConfig field, e.g. --set gamma=0.95")
     p.add_argument("--out", type=Path, default=None)
+    p.add_argument("--checkpoint-every", type=int, default=0, metavar="ITERS",
+                   help="save BenchMARL's checkpoint (models, optimisers, collector state) "
+                        "every ITERS iterations under OUT/benchmarl (0: never)")
+    p.add_argument("--resume", action="store_true",
+                   help="continue from the newest checkpoint under OUT/benchmarl (a run "
+                        "that outlives a session: commit OUT, then --resume elsewhere); "
+                        "the CSVs are appended to")
     p.add_argument("--no-greedy", action="store_true",
                    help="skip the greedy baseline's episodes (reference rows in episodes.csv)")
     args = p.parse_args(argv)
@@ -107,8 +114,16 @@ def main(argv=None):
     cfg.render = False
     cfg.loggers = ["csv"]
     cfg.create_json = False
-    cfg.checkpoint_interval = 0
-    cfg.checkpoint_at_end = False
+    cfg.checkpoint_interval = fpb * args.checkpoint_every
+    cfg.checkpoint_at_end = args.checkpoint_every > 0
+    if args.resume:
+        found = sorted((out / "benchmarl").glob("**/checkpoints/checkpoint_*.pt"),
+                       key=lambda f: int(f.stem.split("_")[-1]))
+        if not found:
+            raise SystemExit(f"--resume: no checkpoint under {out / 'benchmarl'} "
+                             "(runs save them with --checkpoint-every)")
+        cfg.restore_file = str(found[-1])
+        print(f"resuming from {found[-1]}")
     cfg.save_folder = str(out / "benchmarl")
     (out / "benchmarl").mkdir(exist_ok=True)
     for item in args.set:
@@ -117,8 +132,8 @@ def main(argv=None):
             raise SystemExit(f"--set: ExperimentConfig has no field {key!r}")
         setattr(cfg, key, parse_value(value))
 
-    log = CsvLog(out)
-    if not args.no_greedy:
+    log = CsvLog(out, append=args.resume)
+    if not args.no_greedy and not args.resume:
         # The scripted greedy baseline through the same env: the reference to beat.
         env = TendingEnv(setup, num_envs=args.eval_episodes, seed=args.seed + 10_000)
         td = env.rollout(episode_steps, break_when_any_done=False,
@@ -142,12 +157,20 @@ class CsvLog(Callback):
     """Appends every finished episode to episodes.csv and every iteration to
     iterations.csv (files opened per write: BenchMARL pickles its callbacks)."""
 
-    def __init__(self, out: Path):
+    def __init__(self, out: Path, append: bool = False):
         super().__init__()
         self.out = out
         self.start = time.perf_counter()
         self.last = None
         self.iteration = 0
+        if append:
+            # a resumed run continues the iteration count and the wall clock of its CSV
+            with open(out / "iterations.csv") as f:
+                rows = list(csv.reader(f))[1:]
+            if rows:
+                self.iteration = int(rows[-1][0]) + 1
+                self.start -= float(rows[-1][2])
+            return
         self._write("episodes.csv", [["phase", "iteration", "frames", "wall_s", "env",
                                       "parts_delivered", "collisions", "mu", "team_reward"]], "w")
         self._write("iterations.csv", [["iteration", "frames", "wall_s", "iteration_s",
