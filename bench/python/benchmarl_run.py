@@ -143,12 +143,13 @@ def main(argv=None):
         greedy = sum(r[0] for r in rows) / len(rows)
         print(f"greedy: {greedy:.1f} parts per episode ({args.eval_episodes} episodes)")
 
-    log.start = time.perf_counter()
+    log.start = time.perf_counter() - log.resumed_wall
     experiment = Experiment(task=task, algorithm_config=algo, model_config=MlpConfig.get_from_yaml(),
                             seed=args.seed, config=cfg, callbacks=[log])
     experiment.run()
     wall = time.perf_counter() - log.start
     print(f"{args.algorithm} on {setup}: {experiment.total_frames} frames in {wall:.0f} s "
+          f"(training wall time, across resumptions) "
           f"({experiment.total_frames / wall:.0f} frames/s overall, torch threads "
           f"{torch.get_num_threads()}); CSV in {out}")
 
@@ -163,13 +164,14 @@ class CsvLog(Callback):
         self.start = time.perf_counter()
         self.last = None
         self.iteration = 0
+        self.resumed_wall = 0.0
         if append:
             # a resumed run continues the iteration count and the wall clock of its CSV
             with open(out / "iterations.csv") as f:
                 rows = list(csv.reader(f))[1:]
             if rows:
                 self.iteration = int(rows[-1][0]) + 1
-                self.start -= float(rows[-1][2])
+                self.resumed_wall = float(rows[-1][2])
             return
         self._write("episodes.csv", [["phase", "iteration", "frames", "wall_s", "env",
                                       "parts_delivered", "collisions", "mu", "team_reward"]], "w")
