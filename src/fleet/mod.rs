@@ -80,11 +80,12 @@ pub struct FleetArgs {
     /// orca_obstacle_horizon in the fleet's parameters file); default: the deployed ones.
     #[arg(long)]
     pub margins: Option<PathBuf>,
-    /// Directory for the children's logs (default: a temporary directory).
+    /// Directory for the children's logs and the run's ROS 2 parameters file `fleet.yaml`
+    /// (every child's `--params-file`; default: a temporary directory).
     #[arg(long)]
     pub log_dir: Option<PathBuf>,
     /// Bag directory: sim_bridge records every topic it publishes and every cmd_vel it
-    /// receives (rosbag2 MCAP, `-p record:=DIR`).
+    /// receives (rosbag2 MCAP; its `record` parameter in fleet.yaml).
     #[arg(long)]
     pub record: Option<PathBuf>,
     /// Staleness timeout (s) of the bridge (a body whose cmd_vel is older is removed) and of
