@@ -52,6 +52,10 @@ def main(argv=None):
     p.add_argument("--frames", type=int, default=64_000,
                    help="env steps to collect (BenchMARL frames: one per env per step)")
     p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--model", choices=("mlp", "smappo"), default="mlp",
+                   help="actor and critic model: BenchMARL's MLP (MAPPO as the paper's "
+                        "baseline) or the paper's attention encoder "
+                        "(tending.benchmarl_smappo: MAPPO with it is SMAPPO)")
     p.add_argument("--n-envs", type=int, default=32, help="envs stepped together in Rust")
     p.add_argument("--frames-per-batch", type=int, default=None,
                    help="frames per iteration (default: one 200-step episode of every env)")
@@ -91,7 +95,8 @@ def main(argv=None):
 
     task = tb.task(args.setup)
     setup = task.config["setup"]
-    out = args.out or ROOT / "target" / "benchmarl" / f"{args.algorithm}_{setup}_seed{args.seed}"
+    name = args.algorithm if args.model == "mlp" else f"{args.algorithm}-{args.model}"
+    out = args.out or ROOT / "target" / "benchmarl" / f"{name}_{setup}_seed{args.seed}"
     out.mkdir(parents=True, exist_ok=True)
     episode_steps = TendingEnv(setup, num_envs=1).episode_steps
     fpb = args.frames_per_batch or args.n_envs * episode_steps
@@ -144,8 +149,15 @@ def main(argv=None):
         print(f"greedy: {greedy:.1f} parts per episode ({args.eval_episodes} episodes)")
 
     log.start = time.perf_counter() - log.resumed_wall
-    experiment = Experiment(task=task, algorithm_config=algo, model_config=MlpConfig.get_from_yaml(),
-                            seed=args.seed, config=cfg, callbacks=[log])
+    if args.model == "smappo":
+        from tending.benchmarl_smappo import SmappoConfig
+
+        model = critic = SmappoConfig.for_setup(setup)
+    else:
+        model, critic = MlpConfig.get_from_yaml(), None
+    experiment = Experiment(task=task, algorithm_config=algo, model_config=model,
+                            critic_model_config=critic, seed=args.seed, config=cfg,
+                            callbacks=[log])
     experiment.run()
     wall = time.perf_counter() - log.start
     print(f"{args.algorithm} on {setup}: {experiment.total_frames} frames in {wall:.0f} s "

@@ -147,3 +147,48 @@ def test_benchmarl_task():
     assert set(task.info_spec(env)["agents", "info"].keys()) == {"parts_delivered",
                                                                 "collisions", "mu"}
     assert tb.TendingTask["6.4_2"].get_from_yaml().config == {"setup": "6.4_2"}
+
+
+def test_benchmarl_mappo_with_the_smappo_encoder_runs():
+    """The paper's encoder as a BenchMARL model, actor and critic: one short MAPPO
+    iteration on 2.2_2 (one peer per robot); a config for another setup is refused naming
+    the feature counts."""
+    need_torchrl()
+    pytest.importorskip("benchmarl", reason=f"benchmarl: {SKIP}")
+    import torch
+    from benchmarl.algorithms import MappoConfig
+    from benchmarl.experiment import Experiment, ExperimentConfig
+
+    import tending.benchmarl as tb
+    from tending.benchmarl_smappo import SmappoConfig
+
+    torch.set_num_threads(1)
+
+    def experiment(model, tmp):
+        cfg = ExperimentConfig.get_from_yaml()
+        cfg.sampling_device = cfg.train_device = cfg.buffer_device = "cpu"
+        cfg.max_n_frames = 800
+        cfg.on_policy_collected_frames_per_batch = 800
+        cfg.on_policy_n_envs_per_worker = 4
+        cfg.on_policy_n_minibatch_iters = 1
+        cfg.evaluation = False
+        cfg.loggers = []
+        cfg.checkpoint_interval = 0
+        cfg.checkpoint_at_end = False
+        cfg.save_folder = str(tmp)
+        return Experiment(task=tb.task("2.2_2"), algorithm_config=MappoConfig.get_from_yaml(),
+                          model_config=model, critic_model_config=model, seed=0, config=cfg)
+
+    import tempfile
+
+    with tempfile.TemporaryDirectory() as tmp:
+        e = experiment(SmappoConfig.for_setup("2.2_2"), tmp)
+        before = [p.detach().clone() for p in e.policy.parameters()]
+        e.run()
+        assert e.total_frames == 800
+        after = list(e.policy.parameters())
+        assert any(not torch.equal(a, b) for a, b in zip(after, before)), "no update"
+        with pytest.raises(ValueError, match="features"):
+            experiment(SmappoConfig.for_setup("2.4_2"), tmp)
+    with pytest.raises(ValueError, match="N.M_K"):
+        SmappoConfig.for_setup("six")
