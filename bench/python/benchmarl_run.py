@@ -128,6 +128,7 @@ def main(argv=None):
             raise SystemExit(f"--resume: no checkpoint under {out / 'benchmarl'} "
                              "(runs save them with --checkpoint-every)")
         cfg.restore_file = str(found[-1])
+        resume_frames = int(found[-1].stem.split("_")[-1])
         print(f"resuming from {found[-1]}")
     cfg.save_folder = str(out / "benchmarl")
     (out / "benchmarl").mkdir(exist_ok=True)
@@ -137,7 +138,7 @@ def main(argv=None):
             raise SystemExit(f"--set: ExperimentConfig has no field {key!r}")
         setattr(cfg, key, parse_value(value))
 
-    log = CsvLog(out, append=args.resume)
+    log = CsvLog(out, append_from=resume_frames if args.resume else None)
     if not args.no_greedy and not args.resume:
         # The scripted greedy baseline through the same env: the reference to beat.
         env = TendingEnv(setup, num_envs=args.eval_episodes, seed=args.seed + 10_000)
@@ -170,15 +171,23 @@ class CsvLog(Callback):
     """Appends every finished episode to episodes.csv and every iteration to
     iterations.csv (files opened per write: BenchMARL pickles its callbacks)."""
 
-    def __init__(self, out: Path, append: bool = False):
+    def __init__(self, out: Path, append_from: int | None = None):
         super().__init__()
         self.out = out
         self.start = time.perf_counter()
         self.last = None
         self.iteration = 0
         self.resumed_wall = 0.0
-        if append:
-            # a resumed run continues the iteration count and the wall clock of its CSV
+        if append_from is not None:
+            # A resumed run continues from its checkpoint's frame count: rows logged after
+            # that checkpoint (the stopped run went on) are dropped, then the iteration
+            # count and the wall clock continue from the last row kept.
+            for name in ("iterations.csv", "episodes.csv"):
+                with open(out / name) as f:
+                    rows = list(csv.reader(f))
+                col = rows[0].index("frames")
+                kept = [rows[0]] + [r for r in rows[1:] if int(r[col]) <= append_from]
+                self._write(name, kept, "w")
             with open(out / "iterations.csv") as f:
                 rows = list(csv.reader(f))[1:]
             if rows:
