@@ -116,8 +116,10 @@ def gain_verdict(e, setups, paper_pct, k=0, fewer=False):
         sm, mp = mean(e.values(s, "smappo", k)), mean(e.values(s, "mappo", k))
         gains[s] = (100.0 * (1 - sm / mp) if mp else 0.0) if fewer else pct(sm, mp)
     best = max(gains, key=gains.get)
-    ours = f"{gains[best]:+.0f} % ({best})"
-    note = "per setup: " + ", ".join(f"{s} {g:+.0f} %" for s, g in gains.items())
+    # shown as the change of SMAPPO against MAPPO, as the paper writes it (-49 %: fewer)
+    sign = -1 if fewer else 1
+    ours = f"{sign * gains[best]:+.0f} % ({best})"
+    note = "per setup: " + ", ".join(f"{s} {sign * g:+.0f} %" for s, g in gains.items())
     ours += e.seeds_note(done)
     if miss:
         return "pending", ours, note + f"; {len(miss)} (setup, model) pairs have fewer than {SEEDS} seeds"
