@@ -38,6 +38,22 @@ pub struct FleetParams {
 }
 
 impl FleetParams {
+    /// A fleet from greedy's parameters in a `room_size` room, reaching as far as a robot's
+    /// radius, with the simulator's default contact gap (the defaults tests build on).
+    pub fn from_greedy(g: &GreedyParams, room_size: f32) -> Self {
+        Self {
+            robot_radius: g.robot_radius,
+            machine_half: g.machine_half,
+            storage_half: g.storage_half,
+            k_speed: g.k_speed,
+            dt: g.dt,
+            prep_steps: g.prep_steps,
+            room_size,
+            reach: g.robot_radius,
+            collision_distance: DEFAULT_COLLISION_DISTANCE,
+        }
+    }
+
     /// What the greedy controller plans with.
     pub fn greedy_params(&self) -> GreedyParams {
         GreedyParams {
@@ -79,17 +95,7 @@ mod tests {
     /// The default scenario at scale 1, as robot_node's defaults describe it.
     fn default_fleet() -> FleetParams {
         let g = GreedyParams::default();
-        FleetParams {
-            robot_radius: g.robot_radius,
-            machine_half: g.machine_half,
-            storage_half: g.storage_half,
-            k_speed: g.k_speed,
-            dt: g.dt,
-            prep_steps: g.prep_steps,
-            room_size: 2.3,
-            reach: g.robot_radius,
-            collision_distance: DEFAULT_COLLISION_DISTANCE,
-        }
+        FleetParams::from_greedy(&g, 2.3)
     }
 
     #[test]

@@ -317,17 +317,7 @@ mod tests {
 
     fn fleet() -> FleetParams {
         let g = GreedyParams::default();
-        FleetParams {
-            robot_radius: g.robot_radius,
-            machine_half: g.machine_half,
-            storage_half: g.storage_half,
-            k_speed: g.k_speed,
-            dt: g.dt,
-            prep_steps: g.prep_steps,
-            room_size: 2.3,
-            reach: g.robot_radius,
-            collision_distance: crate::fleet::DEFAULT_COLLISION_DISTANCE,
-        }
+        FleetParams::from_greedy(&g, 2.3)
     }
 
     fn batch(peers: &[[f32; 2]]) -> ObsBatch {

@@ -293,17 +293,7 @@ pub(crate) mod tests {
     /// The default fleet (robot_node's default parameters: `node` tests they agree).
     pub(crate) fn fleet() -> FleetParams {
         let g = params(0.5);
-        FleetParams {
-            robot_radius: g.robot_radius,
-            machine_half: g.machine_half,
-            storage_half: g.storage_half,
-            k_speed: g.k_speed,
-            dt: g.dt,
-            prep_steps: g.prep_steps,
-            room_size: 2.3,
-            reach: g.robot_radius,
-            collision_distance: plan::fleet::DEFAULT_COLLISION_DISTANCE,
-        }
+        FleetParams::from_greedy(&g, 2.3)
     }
 
     fn b(own: [f32; 2], has_part: bool, m: Vec<([f32; 2], bool)>, s: Vec<[f32; 2]>) -> ObsBatch {
