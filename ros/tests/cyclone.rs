@@ -24,6 +24,7 @@
 //! `CYCLONE_PEER_URI` replaces the peer's Cyclone configuration (e.g. a finest trace).
 
 mod cyclone_peer;
+mod keystores;
 
 use cyclone_peer::*;
 use msgs::{PoseStamped, Profile, Twist};

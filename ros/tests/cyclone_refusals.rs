@@ -14,7 +14,7 @@
 //! Each test prints both sides' refusal messages (`--nocapture` shows them).
 
 mod cyclone_peer;
-mod forged;
+mod keystores;
 
 use std::path::Path;
 
@@ -171,7 +171,8 @@ fn an_expired_identity_is_refused_by_cyclone_and_by_us() {
 fn a_stolen_identity_with_forged_permissions_in_cyclone_is_refused_by_our_bridge() {
     let (root, ks) = keystore("stolen");
     let (root2, forger) = keystore("forger");
-    let forged = forged::stolen_identity(&ks, &forger, "/tending/robot_0", &["robot_0", "robot_1"]);
+    let forged =
+        keystores::stolen_identity(&ks, &forger, "/tending/robot_0", &["robot_0", "robot_1"]);
     let d = domain(3);
     let (_bc, mut bridge) = participant(d, &enclave(&ks, keystore::BRIDGE_ENCLAVE), "sim_bridge");
     let (_rc, mut robot1) = participant(d, &enclave(&ks, "/tending/robot_1"), "robot_node");

@@ -13,7 +13,7 @@
 //!   meet it: it reads nothing and its `cmd_vel` reaches nobody (the rustdds fix in
 //!   docs/upstream/rustdds/0004-*).
 
-mod forged;
+mod keystores;
 
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
@@ -29,15 +29,7 @@ fn domain(offset: u16) -> u16 {
 }
 
 fn keystore(name: &str) -> (PathBuf, Keystore) {
-    let root = std::env::temp_dir().join(format!("tending-sec-it-{name}-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&root);
-    let ks = Keystore::create(&root).unwrap();
-    ks.create_fleet_enclaves(
-        &["robot_0".into(), "robot_1".into()],
-        Validity::days_from_now(1),
-    )
-    .unwrap();
-    (root, ks)
+    keystores::fleet("sec-it", name)
 }
 
 fn enclave(ks: &Keystore, name: &str) -> Security {
@@ -192,7 +184,7 @@ fn a_stolen_identity_with_self_signed_permissions_is_refused_by_the_bridge() {
     let (root, ks) = keystore("stolen");
     let (root2, attacker) = keystore("attacker");
     let forged =
-        forged::stolen_identity(&ks, &attacker, "/tending/robot_0", &["robot_0", "robot_1"]);
+        keystores::stolen_identity(&ks, &attacker, "/tending/robot_0", &["robot_0", "robot_1"]);
     let d = domain(2);
     let (_bc, mut bridge) = participant(d, &enclave(&ks, keystore::BRIDGE_ENCLAVE), "sim_bridge");
     let (_rc, mut robot1) = participant(d, &enclave(&ks, "/tending/robot_1"), "robot_node");

@@ -9,7 +9,7 @@ use std::process::{Command, Stdio};
 use std::sync::{mpsc, Mutex};
 use std::time::{Duration, Instant};
 
-use keystore::{Keystore, Validity};
+use keystore::Keystore;
 use msgs::{PoseStamped, Profile, Twist};
 use ros::{context_with, node::node, publisher, subscription, NodeSpec, Security};
 use ros2_client::dds::{Context, Node};
@@ -99,15 +99,7 @@ pub fn cyclone_peer() -> PathBuf {
 }
 
 pub fn keystore(name: &str) -> (PathBuf, Keystore) {
-    let root = std::env::temp_dir().join(format!("tending-cyclone-{name}-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&root);
-    let ks = Keystore::create(&root).unwrap();
-    ks.create_fleet_enclaves(
-        &["robot_0".into(), "robot_1".into()],
-        Validity::days_from_now(1),
-    )
-    .unwrap();
-    (root, ks)
+    crate::keystores::fleet("cyclone", name)
 }
 
 pub fn enclave(ks: &Keystore, name: &str) -> Security {
