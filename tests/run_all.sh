@@ -64,8 +64,59 @@ wait_venvs() {
 # `cargo test` does not build for them.
 section "cargo build --release --workspace --bins"
 cargo build --release --locked -j 2 --workspace --bins 2>&1
-section "cargo test --workspace --release"
-cargo test --workspace --release --locked -j 2 2>&1
+
+# Python: rclpy (real ROS 2 Jazzy, Fast DDS, from PyPI wheels) against the release binaries:
+# tests/interop (launch-scripts install layout + launch file, robot_node and sim_bridge
+# interop over DDS); then rosbag2 MCAP bags written by `tending` read back by the `rosbags`
+# and `mcap` + `mcap-ros2-support` packages. The virtualenvs live in target/ (ignored),
+# are created if missing and reinstalled only when their requirements file changes.
+# -rsxR: print why anything was skipped, is a known failure (xfail) or was rerun.
+# --reruns 1: a test that fails is run once more and the summary line says "N rerun":
+# start-up discovery between RustDDS and Fast DDS failed once in ~10 full local runs
+# (rclpy saw none of sim_bridge's writers in 20 s); a real regression fails both runs.
+# No tests collected = pytest exit 5 = failure.
+python_ros_tests() {
+    echo "-- python interop tests (tests/interop)"
+    timeout 900 "$venv/bin/python" -m pytest tests/interop -q -rsxR --reruns 1 --reruns-delay 1 \
+        -p no:cacheprovider || return 1
+    echo "-- python bag tests (tests/bags)"
+    timeout 600 "$venv_b/bin/python" -m pytest tests/bags -q -rs -p no:cacheprovider
+}
+export TENDING_BIN_DIR="${TENDING_BIN_DIR:-$(cd "${CARGO_TARGET_DIR:-target}/release" && pwd)}"
+export RMW_IMPLEMENTATION=rmw_fastrtps_cpp
+unset ROS_LOCALHOST_ONLY ROS_AUTOMATIC_DISCOVERY_RANGE ROS_STATIC_PEERS FASTRTPS_DEFAULT_PROFILES_FILE
+
+# cargo-nextest (part of this machine kind) runs the tests several at once, each in a
+# process of its own: the real-time ROS 2 tests mostly wait on wall-clock time, and one
+# after another they took ~370 s of the suite (.config/nextest.toml, docs/bench/suite.md).
+# The Python ROS tests (real-time too, light on CPU) run beside them once the test
+# binaries are built. Every test leases ROS domains of its own (test-domains/,
+# tests/domain_lease.py), so none meet on DDS. Without nextest, `cargo test` runs the
+# same tests one binary at a time and the Python tests follow.
+if cargo nextest --version >/dev/null 2>&1; then
+    section "cargo nextest: build the test binaries"
+    cargo nextest run --workspace --release --locked --build-jobs 2 --no-run 2>&1
+    wait_venvs
+    py_log="target/python-ros-tests.log"
+    python_ros_tests >"$py_log" 2>&1 &
+    py_pid=$!
+    trap 'kill "$venv_pid" "$py_pid" 2>/dev/null || true' EXIT
+    section "cargo nextest run --workspace --release (python ROS tests beside it)"
+    cargo nextest run --workspace --release --locked --build-jobs 2 --no-fail-fast 2>&1
+    section "cargo test --doc --workspace --release (nextest does not run doctests)"
+    cargo test --workspace --release --locked -j 2 --doc 2>&1
+    section "python ROS tests (tests/interop, tests/bags), run beside nextest"
+    py_ok=0
+    wait "$py_pid" || py_ok=$?
+    cat "$py_log"
+    [ "$py_ok" = 0 ] || { echo "python ROS tests failed (exit $py_ok)"; exit 1; }
+else
+    section "cargo test --workspace --release (cargo-nextest not installed: one binary at a time)"
+    cargo test --workspace --release --locked -j 2 2>&1
+    section "python ROS tests (tests/interop, tests/bags)"
+    wait_venvs
+    python_ros_tests
+fi
 
 # Vendored rustdds (third_party/, ADR 0005): the start-up deadlock regression tests, the
 # DATA_FRAG tests (an encrypted fragment run must survive deserialization) and the
@@ -93,28 +144,6 @@ CARGO_TARGET_DIR="$PWD/target/third_party" cargo test --locked -j 2 --config 'pr
     security::cryptographic::cryptographic_builtin::key_material::tests \
     rtps::message::tests::the_final_data_frag_of_an_unaligned_sample_is_padded_to_4_bytes 2>&1
 rm -rf "$rdds"
-
-# Python: rclpy (real ROS 2 Jazzy, Fast DDS, from PyPI wheels) against the release binaries:
-# tests/interop (launch-scripts install layout + launch file, robot_node and sim_bridge
-# interop over DDS). The virtualenv lives in target/ (ignored), is created if missing and
-# reinstalled only when tests/interop/requirements.txt changes.
-section "python interop tests (tests/interop)"
-wait_venvs
-export TENDING_BIN_DIR="${TENDING_BIN_DIR:-$(cd "${CARGO_TARGET_DIR:-target}/release" && pwd)}"
-export RMW_IMPLEMENTATION=rmw_fastrtps_cpp
-unset ROS_LOCALHOST_ONLY ROS_AUTOMATIC_DISCOVERY_RANGE ROS_STATIC_PEERS FASTRTPS_DEFAULT_PROFILES_FILE
-# -rsxR: print why anything was skipped, is a known failure (xfail) or was rerun.
-# --reruns 1: a test that fails is run once more and the summary line says "N rerun":
-# start-up discovery between RustDDS and Fast DDS failed once in ~10 full local runs
-# (rclpy saw none of sim_bridge's writers in 20 s); a real regression fails both runs.
-# No tests collected = pytest exit 5 = failure (set -e).
-timeout 900 "$venv/bin/python" -m pytest tests/interop -q -rsxR --reruns 1 --reruns-delay 1 \
-    -p no:cacheprovider
-
-# Python: rosbag2 MCAP bags written by `tending` read back by the `rosbags` and
-# `mcap` + `mcap-ros2-support` packages (own venv, same reinstall rule).
-section "python bag tests (tests/bags)"
-timeout 600 "$venv_b/bin/python" -m pytest tests/bags -q -rs -p no:cacheprovider
 
 # Python: the `tending` package (python/: PyO3 + maturin) built from the checkout with
 # `pip install ./python` into its own venv (same reinstall rule for the test

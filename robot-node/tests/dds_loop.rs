@@ -11,11 +11,6 @@ use msgs::{Bool, Clock, PoseStamped, Profile, RosMessage, Time, Twist};
 use ros2_client::dds::{Context, ContextOptions, Node, Publisher, Subscription};
 use ros2_client::{Name, NodeName, NodeOptions};
 
-fn domain(offset: u32) -> u16 {
-    // 20..=219: away from the default 0 and from neighbours' tests
-    20 + ((std::process::id() + offset) % 200) as u16
-}
-
 fn publisher<M: RosMessage>(node: &mut Node, name: &str, profile: Profile) -> Publisher<M> {
     typed_publisher(node, name, M::type_name(), profile)
 }
@@ -287,7 +282,7 @@ fn assert_log_reports_drops_and_discovery(log: &str) {
 
 #[test]
 fn commands_toward_machine_then_zero_when_own_pose_stale() {
-    let d = domain(0);
+    let d = test_domains::domain(0);
     let (_ctx, mut node) = test_node(d, "test_pub");
     let world = World0::new(&mut node);
     let cmd = cmd_subscription(
@@ -381,7 +376,7 @@ fn commands_toward_machine_then_zero_when_own_pose_stale() {
 
 #[test]
 fn sim_time_ticks_follow_clock() {
-    let d = domain(101);
+    let d = test_domains::domain(1);
     let (_ctx, mut node) = test_node(d, "test_clock");
     let clock: Publisher<Clock> = publisher(&mut node, "/clock", Profile::Clock);
     let own_pose: Publisher<PoseStamped> =
@@ -540,7 +535,7 @@ fn assert_final_stats(out_path: &std::path::Path) {
 /// on its own data and sees the other as a peer, each has its own cmd_vel.
 #[test]
 fn two_robots_in_one_process_share_one_reader_per_topic() {
-    let d = domain(57);
+    let d = test_domains::domain(2);
     let (_ctx, mut node) = test_node(d, "test_multi");
     let world = TwoRobotWorld::new(&mut node);
     // spun, so that the node learns which readers its writers matched
@@ -630,7 +625,7 @@ fn lockstep_answer_is_resent_while_no_newer_state_comes() {
     for (i, (resend, extra_min, extra_max)) in
         [("0.3", 2, 5), ("0.0", 0, 0)].into_iter().enumerate()
     {
-        let d = domain(40 + i as u32);
+        let d = test_domains::domain(3 + i as u16);
         let (ctx, mut node) = test_node(d, "lockstep_resend");
         let pose_pub: Publisher<PoseStamped> =
             publisher(&mut node, "/robot_0/pose", Profile::RobotStream);

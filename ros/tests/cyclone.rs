@@ -30,11 +30,6 @@ use cyclone_peer::*;
 use msgs::{PoseStamped, Profile, Twist};
 use ros::{publisher, subscription, Security};
 
-/// This file's domains.
-fn domain(offset: u16) -> u16 {
-    cyclone_peer::domain(170, offset)
-}
-
 /// Cyclone with `robot`'s enclave reads the bridge's poses of `robot` and commands it.
 fn cyclone_robot_talks_to_the_bridge(name: &str, d: u16, robot: &str) {
     let (root, ks) = keystore(name);
@@ -80,7 +75,7 @@ fn cyclone_robot_talks_to_the_bridge(name: &str, d: u16, robot: &str) {
 /// sends the handshake request and Cyclone replies.
 #[test]
 fn a_cyclone_peer_with_a_robot_enclave_reads_the_pose_and_commands_the_robot() {
-    cyclone_robot_talks_to_the_bridge("peer", domain(0), "robot_0");
+    cyclone_robot_talks_to_the_bridge("peer", test_domains::domain(0), "robot_0");
 }
 
 /// robot_1's GUID is below the bridge's: Cyclone sends the request and the bridge
@@ -90,7 +85,7 @@ fn a_cyclone_peer_with_a_robot_enclave_reads_the_pose_and_commands_the_robot() {
 /// runs, and the two never authenticated.
 #[test]
 fn a_cyclone_peer_that_sends_the_handshake_request_authenticates_too() {
-    cyclone_robot_talks_to_the_bridge("request", domain(3), "robot_1");
+    cyclone_robot_talks_to_the_bridge("request", test_domains::domain(3), "robot_1");
 }
 
 /// A Cyclone participant without security, beside the secure bridge and robot_0, and
@@ -99,7 +94,7 @@ fn a_cyclone_peer_that_sends_the_handshake_request_authenticates_too() {
 #[test]
 fn an_unauthenticated_cyclone_participant_reads_nothing_and_commands_nobody() {
     let (root, ks) = keystore("open");
-    let d = domain(1);
+    let d = test_domains::domain(1);
     let (_bc, mut bridge) = participant(d, &enclave(&ks, keystore::BRIDGE_ENCLAVE), "sim_bridge");
     let (_rc, mut robot) = participant(d, &enclave(&ks, "/tending/robot_0"), "robot_node");
     let (_oc, mut open) = participant(d, &Security::Off, "open");
@@ -155,7 +150,7 @@ fn an_unauthenticated_cyclone_participant_reads_nothing_and_commands_nobody() {
 fn a_cyclone_peer_with_another_cas_certificate_is_refused_both_ways() {
     let (root, ks) = keystore("ca");
     let (root2, other) = keystore("other-ca");
-    let d = domain(2);
+    let d = test_domains::domain(2);
     let (_bc, mut bridge) = participant(d, &enclave(&ks, keystore::BRIDGE_ENCLAVE), "sim_bridge");
     // Control: our robot_0 meanwhile reads the bridge's poses and commands robot_0.
     let (_rc, mut robot) = participant(d, &enclave(&ks, "/tending/robot_0"), "robot_node");

@@ -23,10 +23,6 @@ use keystore::{Role, Validity};
 use msgs::{PoseStamped, Profile, Twist};
 use ros::{context_with, publisher, subscription, Security};
 
-fn domain(offset: u16) -> u16 {
-    cyclone_peer::domain(146, offset)
-}
-
 /// The Cyclone peer, configured from `dir`, reading `robot`'s pose and writing its
 /// `cmd_vel` for at most `secs` s; with no Rust participant on its domain.
 fn cyclone_alone(d: u16, dir: &Path, robot: &str, secs: f64) -> PeerResult {
@@ -66,7 +62,7 @@ fn cyclone_says<'a>(r: &'a PeerResult, needles: &[&str]) -> Vec<&'a str> {
 #[test]
 fn a_topic_the_permissions_do_not_grant_is_refused_by_cyclone_and_by_us() {
     let (root, ks) = keystore("ungranted");
-    let d = domain(0);
+    let d = test_domains::domain(0);
     let dir = ks.enclave_dir("/tending/robot_0");
     // Control: with its own robot the same enclave creates everything.
     let ok = cyclone_alone(d, &dir, "robot_0", 0.5);
@@ -107,7 +103,7 @@ fn a_tampered_permissions_document_is_refused_by_cyclone_and_by_us() {
     assert_ne!(p7s, tampered);
     std::fs::write(dir.join("permissions.p7s"), tampered).unwrap();
 
-    let r = cyclone_alone(domain(1), &dir, "robot_1", 0.5);
+    let r = cyclone_alone(test_domains::domain(1), &dir, "robot_1", 0.5);
     assert_eq!(
         r.refused.as_deref(),
         Some("participant"),
@@ -118,7 +114,7 @@ fn a_tampered_permissions_document_is_refused_by_cyclone_and_by_us() {
     assert!(!theirs.is_empty(), "Cyclone did not say why:\n{}", r.log);
     eprintln!("Cyclone: {}", theirs[0]);
 
-    let ours = ours_refused(domain(1), &dir, "/tending/robot_0");
+    let ours = ours_refused(test_domains::domain(1), &dir, "/tending/robot_0");
     eprintln!("ours: {ours}");
     assert!(
         ours.contains("refused enclave `/tending/robot_0`"),
@@ -142,7 +138,7 @@ fn an_expired_identity_is_refused_by_cyclone_and_by_us() {
             past,
         )
         .unwrap();
-    let r = cyclone_alone(domain(2), &dir, "robot_1", 0.5);
+    let r = cyclone_alone(test_domains::domain(2), &dir, "robot_1", 0.5);
     assert_eq!(
         r.refused.as_deref(),
         Some("participant"),
@@ -153,7 +149,7 @@ fn an_expired_identity_is_refused_by_cyclone_and_by_us() {
     assert!(!theirs.is_empty(), "Cyclone did not say why:\n{}", r.log);
     eprintln!("Cyclone: {}", theirs[0]);
 
-    let ours = ours_refused(domain(2), &dir, "/tending/robot_1");
+    let ours = ours_refused(test_domains::domain(2), &dir, "/tending/robot_1");
     eprintln!("ours: {ours}");
     assert!(
         ours.contains("expired") && ours.contains("cert.pem"),
@@ -173,7 +169,7 @@ fn a_stolen_identity_with_forged_permissions_in_cyclone_is_refused_by_our_bridge
     let (root2, forger) = keystore("forger");
     let forged =
         keystores::stolen_identity(&ks, &forger, "/tending/robot_0", &["robot_0", "robot_1"]);
-    let d = domain(3);
+    let d = test_domains::domain(3);
     let (_bc, mut bridge) = participant(d, &enclave(&ks, keystore::BRIDGE_ENCLAVE), "sim_bridge");
     let (_rc, mut robot1) = participant(d, &enclave(&ks, "/tending/robot_1"), "robot_node");
     let real_cmd =

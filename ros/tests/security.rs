@@ -23,11 +23,6 @@ use msgs::{Bool, PoseStamped, Profile, Twist};
 use ros::{context_with, node::node, publisher, subscription, NodeSpec, Security};
 use ros2_client::dds::{Context, Node};
 
-/// A domain of its own per test binary run (other tests and fleets use low ids).
-fn domain(offset: u16) -> u16 {
-    201 + (std::process::id() % 4) as u16 * 8 + offset
-}
-
 fn keystore(name: &str) -> (PathBuf, Keystore) {
     keystores::fleet("sec-it", name)
 }
@@ -79,7 +74,7 @@ fn drain<M: serde::de::DeserializeOwned + 'static>(s: &ros2_client::Subscription
 #[test]
 fn enclaves_talk_and_a_participant_without_security_sees_and_moves_nothing() {
     let (root, ks) = keystore("talk");
-    let d = domain(0);
+    let d = test_domains::domain(0);
     let (_bc, mut bridge) = participant(d, &enclave(&ks, keystore::BRIDGE_ENCLAVE), "sim_bridge");
     let (_rc, mut robot) = participant(d, &enclave(&ks, "/tending/robot_0"), "robot_node");
     let (_sc, mut stranger) = participant(d, &Security::Off, "stranger");
@@ -163,7 +158,7 @@ fn enclaves_talk_and_a_participant_without_security_sees_and_moves_nothing() {
 #[test]
 fn a_robot_enclave_cannot_write_another_robots_cmd_vel() {
     let (root, ks) = keystore("cross");
-    let d = domain(1);
+    let d = test_domains::domain(1);
     let (_rc, mut robot) = participant(d, &enclave(&ks, "/tending/robot_0"), "robot_node");
     assert!(publisher::<Twist>(&mut robot, "/robot_0/cmd_vel", Profile::RobotStream).is_ok());
     let e = publisher::<Twist>(&mut robot, "/robot_1/cmd_vel", Profile::RobotStream)
@@ -185,7 +180,7 @@ fn a_stolen_identity_with_self_signed_permissions_is_refused_by_the_bridge() {
     let (root2, attacker) = keystore("attacker");
     let forged =
         keystores::stolen_identity(&ks, &attacker, "/tending/robot_0", &["robot_0", "robot_1"]);
-    let d = domain(2);
+    let d = test_domains::domain(2);
     let (_bc, mut bridge) = participant(d, &enclave(&ks, keystore::BRIDGE_ENCLAVE), "sim_bridge");
     let (_rc, mut robot1) = participant(d, &enclave(&ks, "/tending/robot_1"), "robot_node");
     let forged_sec = Security::Enclave {
@@ -236,7 +231,7 @@ fn refused(dir: &Path, name: &str) -> String {
         enclave: name.into(),
         dir: dir.to_path_buf(),
     };
-    match context_with(domain(3), &sec) {
+    match context_with(test_domains::domain(3), &sec) {
         Ok(_) => panic!("enclave {} was accepted", dir.display()),
         Err(e) => format!("{e:#}"),
     }
@@ -339,7 +334,7 @@ fn an_identity_that_expired_after_start_is_refused_by_peers_that_meet_it_later()
     )
     .unwrap();
     std::fs::write(dir.join("permissions.p7s"), permissions).unwrap();
-    let d = domain(4);
+    let d = test_domains::domain(4);
     let (_sc, mut suspect) = participant(d, &enclave(&ks, "/tending/robot_1"), "robot_node");
     // past notAfter (whole seconds in the certificate) with a margin
     std::thread::sleep(Duration::from_secs(5));
@@ -364,7 +359,7 @@ fn a_revoked_identity_is_refused_at_start_and_by_its_peers() {
     }
 
     std::fs::remove_file(dir.join("crl.pem")).unwrap();
-    let d = domain(5);
+    let d = test_domains::domain(5);
     let (_sc, mut thief) = participant(d, &enclave(&ks, "/tending/robot_1"), "robot_node");
     let (spied, commanded) = bridge_meets(d, &ks, &mut thief);
     assert_eq!(spied, 0, "a revoked identity read robot_1's poses");

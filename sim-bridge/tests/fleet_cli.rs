@@ -20,13 +20,6 @@ fn tending() -> PathBuf {
     p
 }
 
-/// The ROS domain of this binary's test `k` (0..6): the tests run at once, and a fleet
-/// refuses a domain another fleet is on (docs/adr/0032-one-fleet-per-domain.md), so each
-/// gets its own.
-fn domain(k: u16) -> u16 {
-    (std::process::id() % 18) as u16 * 12 + k
-}
-
 /// `tending fleet ARGS... --no-stdin --domain DOMAIN`; asserts it exited 0 and returns
 /// its stdout.
 fn run_fleet(args: &[&std::ffi::OsStr], domain: u16) -> String {
@@ -57,7 +50,7 @@ fn final_metrics(stdout: &str) -> serde_json::Value {
 
 #[test]
 fn realtime_fleet_delivers_parts_and_stops_cleanly() {
-    let domain = domain(0);
+    let domain = test_domains::domain(0);
     let out = Command::new(tending())
         .args([
             "fleet",
@@ -89,7 +82,7 @@ fn realtime_fleet_delivers_parts_and_stops_cleanly() {
 /// like one process per robot: every robot acts on the bridge's state and parts arrive.
 #[test]
 fn grouped_robot_processes_keep_every_robot_on_state() {
-    let domain = domain(1);
+    let domain = test_domains::domain(1);
     let out = Command::new(tending())
         .args(["fleet", "--setup", "6.4_2", "--duration", "12"])
         .args(["--robots-per-process", "3", "--no-stdin"])
@@ -116,7 +109,7 @@ fn grouped_robot_processes_keep_every_robot_on_state() {
 
 #[test]
 fn lockstep_fleet_ends_at_the_requested_sim_time() {
-    let domain = domain(2);
+    let domain = test_domains::domain(2);
     let out = Command::new(tending())
         .args([
             "fleet",
@@ -145,7 +138,7 @@ fn lockstep_fleet_ends_at_the_requested_sim_time() {
 /// recomputes from it the parts the bridge reported in its final metrics line.
 #[test]
 fn recorded_fleet_bag_matches_the_final_metrics() {
-    let domain = domain(3);
+    let domain = test_domains::domain(3);
     let dir = std::env::temp_dir().join(format!("tending-rec-{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&dir);
     let stdout = run_fleet(
@@ -204,7 +197,7 @@ fn recorded_fleet_bag_matches_the_final_metrics() {
 /// rule, robots of a 20-robot fleet acted with no machine known yet and drove into them.
 #[test]
 fn realtime_robots_first_act_with_every_entity_known() {
-    let domain = domain(4);
+    let domain = test_domains::domain(4);
     let logs = std::env::temp_dir().join(format!("tending-settle-{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&logs);
     run_fleet(
@@ -259,7 +252,7 @@ fn recorded_poses(
 /// and then most commands must still answer the stepped state.
 #[test]
 fn realtime_fleet_moves_robots_as_lockstep_does() {
-    let domain = domain(5);
+    let domain = test_domains::domain(5);
     let base = std::env::temp_dir().join(format!("tending-rt-vs-ls-{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&base);
     let run = |mode: &str, secs: &str| {

@@ -29,11 +29,6 @@ fn tending() -> PathBuf {
     p
 }
 
-/// This test's domains: each test its own few, all apart from the others in this binary.
-fn domain(offset: u16) -> u16 {
-    (std::process::id() % 37) as u16 * 6 + offset
-}
-
 /// A stand-in for another fleet on `domain`: its bridge's and a robot's nodes, and a
 /// cmd_vel writer for that robot.
 struct OtherFleet {
@@ -89,7 +84,7 @@ fn text(o: &Output) -> (String, String) {
 
 #[test]
 fn a_domain_with_another_fleet_on_it_is_refused() {
-    let d = domain(0);
+    let d = test_domains::domain(0);
     let _other = OtherFleet::start(d);
     std::thread::sleep(Duration::from_secs(1));
     let t0 = std::time::Instant::now();
@@ -126,7 +121,7 @@ fn a_domain_with_another_fleet_on_it_is_refused() {
 
 #[test]
 fn domain_auto_moves_to_the_next_free_domain_and_says_so() {
-    let d = domain(2);
+    let d = test_domains::domain(2);
     let _other = OtherFleet::start(d);
     std::thread::sleep(Duration::from_secs(1));
     let o = fleet(
@@ -147,7 +142,7 @@ fn domain_auto_moves_to_the_next_free_domain_and_says_so() {
 
 #[test]
 fn cmd_vel_from_a_second_writer_fails_the_run() {
-    let d = domain(4);
+    let d = test_domains::domain(4);
     let stop = Arc::new(AtomicBool::new(false));
     let stop2 = stop.clone();
     // the other fleet arrives 8 s after this one started (past its check) and commands

@@ -342,7 +342,7 @@ fn live_add_kill_and_machine_keep_the_fleet_working() {
         .ok()
         .and_then(|v| v.parse().ok())
         .unwrap_or(15.0);
-    let domain = (std::process::id() % 40) as u16 + 60;
+    let domain = test_domains::domain(0);
     let dir = std::env::temp_dir().join(format!("tending-live-{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&dir);
     let pol = policy();

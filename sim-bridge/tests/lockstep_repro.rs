@@ -46,10 +46,6 @@ fn offline_policy(setup: Setup, seed: u64, steps: u32, path: &std::path::Path) -
     .0
 }
 
-fn domain(offset: u16) -> u16 {
-    (std::process::id() % 80) as u16 * 2 + 40 + offset
-}
-
 #[test]
 fn greedy_fleet_in_lockstep_reproduces_the_offline_episode() {
     let setup = Setup::new(4, 3, 2);
@@ -59,7 +55,15 @@ fn greedy_fleet_in_lockstep_reproduces_the_offline_episode() {
         off.delivered > 0,
         "choose a seed where greedy delivers something"
     );
-    let m = fleet_lockstep(setup, seed, steps, domain(0), &env0, None, &[]);
+    let m = fleet_lockstep(
+        setup,
+        seed,
+        steps,
+        test_domains::domain(0),
+        &env0,
+        None,
+        &[],
+    );
     assert_same("greedy", &off, &m, steps);
 }
 
@@ -78,7 +82,7 @@ fn lockstep_without_settling_loses_no_robot() {
         setup,
         seed,
         steps,
-        domain(3),
+        test_domains::domain(3),
         &env0,
         None,
         &[],
@@ -112,7 +116,7 @@ fn paper_policy_fleet_in_lockstep_reproduces_the_offline_episode() {
         setup,
         seed,
         steps,
-        domain(1),
+        test_domains::domain(1),
         &env0,
         Some(&path),
         &["orca_filter:=false"],
@@ -144,7 +148,7 @@ fn secure_policy_fleet_in_lockstep_reproduces_the_offline_episode() {
         setup,
         seed,
         steps,
-        domain(2),
+        test_domains::domain(2),
         &env0,
         Some(&path),
         &["orca_filter:=false"],

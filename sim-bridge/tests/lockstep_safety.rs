@@ -120,10 +120,6 @@ fn offline_matching_orca(setup: Setup, seed: u64, steps: u32) -> (Offline, Env) 
     })
 }
 
-fn domain(offset: u16) -> u16 {
-    (std::process::id() % 50) as u16 * 2 + 120 + offset
-}
-
 #[test]
 fn greedy_orca_fleet_in_lockstep_reproduces_the_offline_episode() {
     let setup = Setup::new(6, 4, 2);
@@ -137,7 +133,7 @@ fn greedy_orca_fleet_in_lockstep_reproduces_the_offline_episode() {
         setup,
         seed,
         steps,
-        domain(0),
+        test_domains::domain(0),
         &env0,
         None,
         &["controller:=greedy-orca"],
@@ -160,7 +156,7 @@ fn shielded_policy_fleet_in_lockstep_reproduces_the_offline_episode() {
         setup,
         seed,
         steps,
-        domain(1),
+        test_domains::domain(1),
         &env0,
         Some(&path),
         &["shield:=true"],
@@ -183,7 +179,7 @@ fn orca_filtered_policy_fleet_in_lockstep_reproduces_the_offline_episode() {
         setup,
         seed,
         steps,
-        domain(2),
+        test_domains::domain(2),
         &env0,
         Some(&path),
         &["orca_filter:=true"],
@@ -200,7 +196,15 @@ fn bundled_target_policy_fleet_in_lockstep_reproduces_the_offline_episode() {
     assert!(off.delivered > 0, "choose a seed where the policy delivers");
     let env0 = Env::new(ScenarioConfig::default(), setup, seed).unwrap();
     // No parameters: the default (planner + 40 mm filter) is what is checked.
-    let m = fleet_lockstep(setup, seed, steps, domain(3), &env0, Some(&path), &[]);
+    let m = fleet_lockstep(
+        setup,
+        seed,
+        steps,
+        test_domains::domain(3),
+        &env0,
+        Some(&path),
+        &[],
+    );
     assert_same("target policy", &off, &m, steps);
 }
 
@@ -217,7 +221,7 @@ fn matching_orca_fleet_in_lockstep_reproduces_the_offline_episode() {
         setup,
         seed,
         steps,
-        domain(4),
+        test_domains::domain(4),
         &env0,
         None,
         &["controller:=matching-orca"],

@@ -120,8 +120,7 @@ fn measure(b: &Bridge, got: &[(Instant, f64)]) -> Measured {
 
 #[test]
 fn state_delay_holds_every_state_message_without_stopping_the_simulation() {
-    let base = (std::process::id() % 6) as u16 * 2 + 220; // 220..231: above the other tests
-    let (d_delay, d_clean) = (base, base + 1);
+    let (d_delay, d_clean) = (test_domains::domain(0), test_domains::domain(1));
     let delayed = spawn_bridge(d_delay, DELAY_MS);
     let clean = spawn_bridge(d_clean, 0.0);
     let ctx_d = Context::with_options(ContextOptions::new().domain_id(d_delay)).unwrap();

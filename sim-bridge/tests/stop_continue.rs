@@ -19,10 +19,6 @@ use std::time::{Duration, Instant};
 
 use lockstep_common::{robot_node_bin, Kill};
 
-fn domain() -> u16 {
-    (std::process::id() % 40) as u16 + 180
-}
-
 fn signal(pid: u32, sig: i32) {
     // SAFETY: kill(2) on a child process id this test owns.
     let rc = unsafe { libc::kill(pid as i32, sig) };
@@ -31,7 +27,7 @@ fn signal(pid: u32, sig: i32) {
 
 #[test]
 fn a_robot_stopped_and_continued_keeps_commanding() {
-    let d = domain().to_string();
+    let d = test_domains::domain(0).to_string();
     let mut bridge = Kill(vec![Command::new(env!("CARGO_BIN_EXE_sim_bridge"))
         .env("ROS_DOMAIN_ID", &d)
         .args(["--ros-args", "-p", "setup:=2.2_1", "-p", "seed:=0"])

@@ -3,6 +3,7 @@
 import os
 import pathlib
 import subprocess
+import sys
 
 import pytest
 
@@ -11,15 +12,13 @@ REPO = pathlib.Path(__file__).resolve().parents[2]
 RELEASE = pathlib.Path(os.environ.get('TENDING_BIN_DIR') or REPO / 'target' / 'release')
 TENDING = RELEASE / 'tending'
 
-_BASE = os.getpid() % 80
-_next = [0]
+sys.path.insert(0, str(REPO / 'tests'))
+from domain_lease import lease  # noqa: E402
 
 
 def next_domain_id():
-    """A DDS domain of its own per test (121..200: clear of tests/interop's 1..100)."""
-    d = 121 + (_BASE + _next[0]) % 80
-    _next[0] += 1
-    return d
+    """A DDS domain of its own per test (tests/domain_lease.py)."""
+    return lease()
 
 
 @pytest.fixture

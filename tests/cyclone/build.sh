@@ -9,6 +9,10 @@ here="$(cd "$(dirname "$0")" && pwd)"
 out="${1:-$here/../../target/cyclone}"
 mkdir -p "$out"
 out="$(cd "$out" && pwd)"
+# One build at a time: the test runner starts several Cyclone tests at once, and two
+# apt-get runs or two idlc runs into one directory would trip over each other.
+exec 9>"$out/.build.lock"
+flock 9
 need=0
 command -v idlc >/dev/null || need=1
 [ -f /usr/include/dds/dds.h ] || need=1

@@ -14,7 +14,7 @@ const ROBOT_STALE_S: f64 = 1.0;
 
 #[test]
 fn robots_stop_within_the_stale_timeout_and_resume_after_a_bridge_restart() {
-    let domain = (std::process::id() % 40) as u16 + 110;
+    let domain = test_domains::domain(0);
     let setup = "2.2_1";
     let dir = std::env::temp_dir().join(format!("tending-restart-{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&dir);

@@ -343,7 +343,7 @@ fn check_bridge_rejections(m_end: &Json, failures: &mut Vec<String>) -> (f64, f6
 
 #[test]
 fn hostile_publisher_is_counted_and_the_fleet_keeps_working() {
-    let domain = (std::process::id() % 40) as u16 + 160;
+    let domain = test_domains::domain(0);
     let mut fleet = Fleet::start(domain, "3.3_1");
     // clean phase
     sleep_s(12.0);

@@ -351,7 +351,7 @@ fn kill_once(domain: u16, seed: u64, kill_at: f64) -> (Kill, String) {
 fn a_killed_robot_stops_within_the_command_timeout_and_touches_nothing() {
     let kill_at = env_f64("TENDING_KILL_AT_S", 12.0);
     let seed = env_f64("TENDING_KILL_SEED", 0.0) as u64;
-    let domain = (std::process::id() % 40) as u16 + 20;
+    let domain = test_domains::domain(0);
     let mut touched = Vec::new();
     for at in [kill_at, kill_at + 3.0] {
         let (k, text) = kill_once(domain, seed, at);

@@ -145,7 +145,7 @@ fn run_case(case: &str, secs: f64, seed: u64, k: u32) -> serde_json::Value {
             panic!("iptables statistic DROP failed (apt-get install iptables): {e}")
         });
     }
-    let domain = 30;
+    let domain = test_domains::domain(0);
     let setup = "3.3_1";
     // both ways: commands into the simulator and state out of it
     let cmd_delay = format!("test_cmd_delay_ms:={delay}");

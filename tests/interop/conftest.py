@@ -1,8 +1,8 @@
 """Shared helpers of the rclpy interop tests.
 
-Every test gets its own ROS_DOMAIN_ID, derived from this pytest process id (1..100), so
-parallel runs and leftovers of the previous test (DDS endpoints of a process that just
-exited, latched samples) do not clash. Every wait is bounded.
+Every test gets its own ROS_DOMAIN_ID, leased (tests/domain_lease.py) so that the Rust
+tests running at the same time and leftovers of the previous test (DDS endpoints of a
+process that just exited, latched samples) do not clash. Every wait is bounded.
 """
 
 import math
@@ -11,6 +11,7 @@ import pathlib
 import re
 import signal
 import subprocess
+import sys
 import time
 
 import pytest
@@ -24,14 +25,12 @@ SIM_BRIDGE = RELEASE / 'sim_bridge'
 # Fast DDS vs RustDDS discovery on a loaded 2-core machine: allow generous bounds.
 DISCOVERY_TIMEOUT_S = 20.0
 
-_BASE = os.getpid() % 100
-_next = [0]
+sys.path.insert(0, str(REPO / 'tests'))
+from domain_lease import lease  # noqa: E402
 
 
 def next_domain_id():
-    d = 1 + (_BASE + _next[0]) % 100
-    _next[0] += 1
-    return d
+    return lease()
 
 
 @pytest.fixture

@@ -28,6 +28,7 @@ from conftest import (
     ROBOT_NODE,
     ROBOT_STREAM,
     SIM_BRIDGE,
+    next_domain_id,
     CmdLog,
     Periodic,
     bool_msg,
@@ -317,7 +318,7 @@ def test_ros2_reads_the_parameters_file_tending_fleet_writes(tmp_path, ros):
     require_binary(TENDING)
     logs = tmp_path / 'logs'
     r = subprocess.run([TENDING, 'fleet', '--setup', '6.4_2', '--mode', 'lockstep',
-                        '--duration', '0.5', '--domain', str(ros.domain_id + 100),
+                        '--duration', '0.5', '--domain', str(next_domain_id()),
                         '--domain-check', '0', '--no-stdin', '--log-dir', str(logs),
                         '--policy', 'matching-orca'],
                        capture_output=True, text=True, timeout=120)

@@ -14,12 +14,6 @@ use msgs::{PoseStamped, Profile, Twist};
 use ros::{context_with, node::node, publisher, subscription, NodeSpec, Security};
 use ros2_client::dds::{Context, Node};
 
-/// Domains of their own: `base` + 6 per process id mod 4 + `offset` (ros/tests/security.rs
-/// uses 201..=230; cyclone.rs 170..=193, cyclone_refusals.rs 146..=169).
-pub fn domain(base: u16, offset: u16) -> u16 {
-    base + (std::process::id() % 4) as u16 * 6 + offset
-}
-
 /// RustDDS's log lines (secure discovery at info, the rest at warn) of this test binary,
 /// for the tests to show what our side refused.
 pub static RUST_LOG_LINES: Mutex<Vec<String>> = Mutex::new(Vec::new());
