@@ -127,7 +127,8 @@ table() { # name title csv-glob... [-- training log.csv... for the paper's last-
     done
     python3 bench/experiments/table.py --exp "$name" --paper bench/experiments/paper_mu.csv \
         --eval-episodes "$EVAL_EPISODES" --eval-seeds "$EVAL_SEEDS" --out "docs/experiments/$name.md" \
-        ${logs[@]:+--logs "${logs[@]}"} "$title" "$SCALE" "$SEEDS" "${files[@]}" ${extra[@]:+"${extra[@]}"}
+        "$title" "$SCALE" "$SEEDS" "${files[@]}" ${extra[@]:+"${extra[@]}"} \
+        ${logs[@]:+--logs "${logs[@]}"}  # last: --logs takes every argument after it
     echo "wrote docs/experiments/$name.md"
     # the bars draw the trained models beside greedy and greedy-ORCA (the policy column
     # names those two; matching-ORCA and the shipped policy are in the table)
