@@ -144,6 +144,7 @@ class VelocityTracker(Dynamics):
     def __init__(self, k_speed, dt, drag, mass, max_force):
         super().__init__()
         self.k_speed, self.dt, self.drag, self.mass, self.max_force = k_speed, dt, drag, mass, max_force
+        self._table = None
 
     @property
     def needed_action_size(self) -> int:
@@ -151,9 +152,10 @@ class VelocityTracker(Dynamics):
 
     def process_action(self):
         u = self.agent.action.u[:, 0]
-        table = torch.tensor(_MOVE_OF_U_INDEX, device=u.device)
+        if self._table is None or self._table.device != u.device:
+            self._table = torch.tensor(_MOVE_OF_U_INDEX, device=u.device) * self.k_speed
         g = torch.round(2 * (u + 1)).long().clamp(0, 4)
-        cmd = table[g] * self.k_speed
+        cmd = self._table[g]
         f = self.mass * (cmd - (1 - self.drag) * self.agent.state.vel) / self.dt
         norm = f.norm(dim=-1, keepdim=True)
         f = torch.where(norm > self.max_force, f * self.max_force / norm.clamp(min=1e-12), f)
@@ -437,18 +439,23 @@ class TendingScenario(BaseScenario):
 ENV_NAME = "vmas_tending"
 
 
-def _task_classes():
-    """Built on first use so that importing this module needs only vmas and torch."""
-    from benchmarl.environments.common import TaskClass
-    from torchrl.envs.libs.vmas import VmasEnv
-    from torchrl.envs.utils import MarlGroupMapType
+def _task_class():
+    """The BenchMARL task class, built on first use (importing benchmarl takes seconds, and
+    the scenario alone needs only vmas and torch), then kept as the module attribute
+    ``VmasTendingClass`` so that BenchMARL can pickle the task."""
+    if "VmasTendingClass" in globals():
+        return globals()["VmasTendingClass"]
+    from benchmarl.environments.common import TaskClass as _TaskClass
 
-    class VmasTendingClass(TaskClass):
+    class VmasTendingClass(_TaskClass):
         """BenchMARL task: TorchRL's ``VmasEnv`` over a :class:`TendingScenario` instance
         (discrete actions only; one group ``"agents"``, as ``tending/<setup>`` has)."""
 
         def get_env_fun(self, num_envs: int, continuous_actions: bool, seed: Optional[int],
                         device) -> Callable:
+            from torchrl.envs.libs.vmas import VmasEnv
+            from torchrl.envs.utils import MarlGroupMapType
+
             if continuous_actions:
                 raise ValueError("vmas_tending has the paper's 5 discrete actions only")
             cfg = copy.deepcopy(self.config)
@@ -499,18 +506,14 @@ def _task_classes():
         def env_name() -> str:
             return ENV_NAME
 
+    VmasTendingClass.__qualname__ = "VmasTendingClass"
+    globals()["VmasTendingClass"] = VmasTendingClass
     return VmasTendingClass
-
-
-_CLASS = None
 
 
 def task(name: str = "6.4_2", **config):
     """The BenchMARL task ``vmas_tending/<setup>`` (``name`` "6.4_2" or
     "vmas_tending/6.4_2"); ``config``: scenario kwargs (``obs_layout``, constants)."""
-    global _CLASS
-    if _CLASS is None:
-        _CLASS = _task_classes()
     setup = name.split("/", 1)[1] if name.startswith(ENV_NAME + "/") else name
     parse_setup(setup)
-    return _CLASS(name=setup, config={"setup": setup, **config})
+    return _task_class()(name=setup, config={"setup": setup, **config})
