@@ -291,3 +291,45 @@ pub struct DiagnosticArray {
     pub header: Header,
     pub status: Vec<DiagnosticStatus>,
 }
+
+impl DiagnosticArray {
+    /// The first value named `key` in any status, as a number: `/tending/metrics` carries
+    /// the bridge's figures as key-value strings. None when absent or not a number.
+    pub fn number(&self, key: &str) -> Option<f64> {
+        self.status
+            .iter()
+            .flat_map(|s| s.values.iter())
+            .find(|kv| kv.key == key)
+            .and_then(|kv| kv.value.parse().ok())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn diagnostic_numbers_are_found_in_any_status_and_bad_ones_are_none() {
+        let kv = |k: &str, v: &str| KeyValue {
+            key: k.into(),
+            value: v.into(),
+        };
+        let d = DiagnosticArray {
+            header: Header::default(),
+            status: vec![
+                DiagnosticStatus {
+                    values: vec![kv("step", "12")],
+                    ..Default::default()
+                },
+                DiagnosticStatus {
+                    values: vec![kv("mu", "0.75"), kv("setup", "6.4_2")],
+                    ..Default::default()
+                },
+            ],
+        };
+        assert_eq!(d.number("step"), Some(12.0));
+        assert_eq!(d.number("mu"), Some(0.75));
+        assert_eq!(d.number("setup"), None, "not a number");
+        assert_eq!(d.number("absent"), None);
+    }
+}

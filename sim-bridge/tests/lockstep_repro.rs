@@ -8,13 +8,12 @@
 mod lockstep_common;
 
 use lockstep_common::{
-    assert_same, fleet_lockstep, fleet_lockstep_in, greedy_policy_actions, offline_episode,
-    policy_with_states, pretrained, Offline,
+    greedy_policy_actions, offline_episode, policy_with_states, pretrained, LockstepRun, Offline,
 };
 
-use sim::{Env, ScenarioConfig, Setup};
+use sim::{Env, Setup};
 
-fn offline_greedy(setup: Setup, seed: u64, steps: u32) -> (Offline, Env) {
+fn offline_greedy(setup: Setup, seed: u64, steps: u32) -> Offline {
     offline_episode(
         setup,
         seed,
@@ -43,28 +42,18 @@ fn offline_policy(setup: Setup, seed: u64, steps: u32, path: &std::path::Path) -
         env.step_actions(&greedy_policy_actions(pol, states, batch))
             .unwrap();
     })
-    .0
 }
 
 #[test]
 fn greedy_fleet_in_lockstep_reproduces_the_offline_episode() {
     let setup = Setup::new(4, 3, 2);
     let (seed, steps) = (5, 200);
-    let (off, env0) = offline_greedy(setup, seed, steps);
+    let off = offline_greedy(setup, seed, steps);
     assert!(
         off.delivered > 0,
         "choose a seed where greedy delivers something"
     );
-    let m = fleet_lockstep(
-        setup,
-        seed,
-        steps,
-        test_domains::domain(0),
-        &env0,
-        None,
-        &[],
-    );
-    assert_same("greedy", &off, &m, steps);
+    LockstepRun::new(setup, seed, steps, test_domains::domain(0)).assert_reproduces("greedy", &off);
 }
 
 /// The bridge publishes the first state as soon as every robot's cmd_vel is discovered,
@@ -77,18 +66,11 @@ fn greedy_fleet_in_lockstep_reproduces_the_offline_episode() {
 fn lockstep_without_settling_loses_no_robot() {
     let setup = Setup::new(4, 3, 2);
     let (seed, steps) = (5, 60);
-    let env0 = Env::new(ScenarioConfig::default(), setup, seed).unwrap();
-    let m = fleet_lockstep_in(
-        setup,
-        seed,
-        steps,
-        test_domains::domain(3),
-        &env0,
-        None,
-        &[],
-        &["settle_s:=0.0"],
-        None,
-    );
+    let m = LockstepRun {
+        bridge_params: &["settle_s:=0.0"],
+        ..LockstepRun::new(setup, seed, steps, test_domains::domain(3))
+    }
+    .run();
     eprintln!("no settling: {m}");
     assert_eq!(m["step"], steps, "{m}");
     assert_eq!(m["despawned"], 0, "{m}");
@@ -100,28 +82,16 @@ fn lockstep_without_settling_loses_no_robot() {
 fn paper_policy_fleet_in_lockstep_reproduces_the_offline_episode() {
     // The paper's 5-move policy, raw: its actions are stepped as the simulator's own.
     let path = pretrained("smappo_moves_6.4_2.safetensors");
-    if !path.exists() {
-        eprintln!(
-            "SKIPPED: no bundled checkpoint at {} (the greedy test covers lockstep)",
-            path.display()
-        );
-        return;
-    }
     let setup = Setup::new(6, 4, 2);
     let (seed, steps) = (0, 200);
     let off = offline_policy(setup, seed, steps, &path);
-    let env0 = Env::new(ScenarioConfig::default(), setup, seed).unwrap();
     // The raw policy: robot_node's default ORCA filter off (lockstep_safety covers it).
-    let m = fleet_lockstep(
-        setup,
-        seed,
-        steps,
-        test_domains::domain(1),
-        &env0,
-        Some(&path),
-        &["orca_filter:=false"],
-    );
-    assert_same("policy", &off, &m, steps);
+    LockstepRun {
+        policy: Some(&path),
+        robot_params: &["orca_filter:=false"],
+        ..LockstepRun::new(setup, seed, steps, test_domains::domain(1))
+    }
+    .assert_reproduces("policy", &off);
 }
 
 /// The same episode with DDS Security on (every process in its own enclave, Enforce):
@@ -129,32 +99,21 @@ fn paper_policy_fleet_in_lockstep_reproduces_the_offline_episode() {
 #[test]
 fn secure_policy_fleet_in_lockstep_reproduces_the_offline_episode() {
     let path = pretrained("smappo_moves_6.4_2.safetensors");
-    assert!(
-        path.exists(),
-        "the bundled checkpoint {} is missing",
-        path.display()
-    );
     let setup = Setup::new(6, 4, 2);
     let (seed, steps) = (0, 200);
     let off = offline_policy(setup, seed, steps, &path);
-    let env0 = Env::new(ScenarioConfig::default(), setup, seed).unwrap();
     let root = std::env::temp_dir().join(format!("tending-lockstep-ks-{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&root);
     let ks = keystore::Keystore::create(&root).unwrap();
     let robots: Vec<String> = (0..setup.robots).map(|i| format!("robot_{i}")).collect();
     ks.create_fleet_enclaves(&robots, keystore::Validity::days_from_now(1))
         .unwrap();
-    let m = fleet_lockstep_in(
-        setup,
-        seed,
-        steps,
-        test_domains::domain(2),
-        &env0,
-        Some(&path),
-        &["orca_filter:=false"],
-        &[],
-        Some(&root),
-    );
-    assert_same("secure policy", &off, &m, steps);
+    LockstepRun {
+        policy: Some(&path),
+        robot_params: &["orca_filter:=false"],
+        keystore: Some(&root),
+        ..LockstepRun::new(setup, seed, steps, test_domains::domain(2))
+    }
+    .assert_reproduces("secure policy", &off);
     std::fs::remove_dir_all(root).unwrap();
 }

@@ -12,14 +12,12 @@
 
 mod lockstep_common;
 
-use lockstep_common::{
-    assert_same, fleet_lockstep, offline_episode, policy_with_states, pretrained, Offline,
-};
+use lockstep_common::{offline_episode, policy_with_states, pretrained, LockstepRun, Offline};
 
 use sim::plan::pilot::{self, FilterMargins, MatchingOrca, Outputs, Pilot, Row, Safety};
-use sim::{Env, ScenarioConfig, Setup};
+use sim::{Env, Setup};
 
-fn offline_greedy_orca(setup: Setup, seed: u64, steps: u32) -> (Offline, Env) {
+fn offline_greedy_orca(setup: Setup, seed: u64, steps: u32) -> Offline {
     let init = |env: &Env| {
         (
             sim::baselines::GreedyOrcaFleet::new(env).unwrap(),
@@ -74,13 +72,6 @@ fn offline_piloted(
             env.step_velocities(vels).unwrap();
         },
     )
-    .0
-}
-
-/// The paper's 5-move policy through the ORCA filter as deployed.
-fn offline_filtered(setup: Setup, seed: u64, steps: u32, path: &std::path::Path) -> Offline {
-    let safety = Safety::filtered(FilterMargins::DEPLOYED);
-    offline_piloted(setup, seed, steps, path, Outputs::Moves, safety)
 }
 
 /// The bundled target-action policy as robot_node runs it by default and `tending eval`
@@ -91,18 +82,9 @@ fn offline_targets(setup: Setup, seed: u64, steps: u32, path: &std::path::Path) 
     offline_piloted(setup, seed, steps, path, Outputs::Targets, safety)
 }
 
-/// The paper's 5-move policy behind the action shield.
-fn offline_shielded(setup: Setup, seed: u64, steps: u32, path: &std::path::Path) -> Offline {
-    let safety = Safety {
-        shield: true,
-        filter: None,
-    };
-    offline_piloted(setup, seed, steps, path, Outputs::Moves, safety)
-}
-
 /// matching-ORCA (`plan::MatchingOrca`, robot_node's `controller:=matching-orca`): every
 /// robot always asks for the menu's "matched" entry, through the deployed ORCA filter.
-fn offline_matching_orca(setup: Setup, seed: u64, steps: u32) -> (Offline, Env) {
+fn offline_matching_orca(setup: Setup, seed: u64, steps: u32) -> Offline {
     let init = |env: &Env| {
         let fleet = sim::baselines::fleet_params(env.sizes(), env.config());
         let one = MatchingOrca::new(&fleet, FilterMargins::DEPLOYED).unwrap();
@@ -120,71 +102,50 @@ fn offline_matching_orca(setup: Setup, seed: u64, steps: u32) -> (Offline, Env) 
     })
 }
 
+/// The bundled 5-move policy, a seed and what robot_node is told: the three ways of
+/// running it that the fleet must reproduce.
+fn moves_policy_reproduces(name: &str, seed: u64, offset: u16, safety: Safety, params: &[&str]) {
+    let path = pretrained("smappo_moves_6.4_2.safetensors");
+    let setup = Setup::new(6, 4, 2);
+    let steps = 200;
+    let off = offline_piloted(setup, seed, steps, &path, Outputs::Moves, safety);
+    LockstepRun {
+        policy: Some(&path),
+        robot_params: params,
+        ..LockstepRun::new(setup, seed, steps, test_domains::domain(offset))
+    }
+    .assert_reproduces(name, &off);
+}
+
 #[test]
 fn greedy_orca_fleet_in_lockstep_reproduces_the_offline_episode() {
     let setup = Setup::new(6, 4, 2);
     let (seed, steps) = (3, 200);
-    let (off, env0) = offline_greedy_orca(setup, seed, steps);
+    let off = offline_greedy_orca(setup, seed, steps);
     assert!(
         off.delivered > 0,
         "choose a seed where greedy-orca delivers"
     );
-    let m = fleet_lockstep(
-        setup,
-        seed,
-        steps,
-        test_domains::domain(0),
-        &env0,
-        None,
-        &["controller:=greedy-orca"],
-    );
-    assert_same("greedy-orca", &off, &m, steps);
+    LockstepRun {
+        robot_params: &["controller:=greedy-orca"],
+        ..LockstepRun::new(setup, seed, steps, test_domains::domain(0))
+    }
+    .assert_reproduces("greedy-orca", &off);
 }
 
 #[test]
 fn shielded_policy_fleet_in_lockstep_reproduces_the_offline_episode() {
-    let path = pretrained("smappo_moves_6.4_2.safetensors");
-    if !path.exists() {
-        eprintln!("SKIPPED: no bundled checkpoint at {}", path.display());
-        return;
-    }
-    let setup = Setup::new(6, 4, 2);
-    let (seed, steps) = (0, 200);
-    let off = offline_shielded(setup, seed, steps, &path);
-    let env0 = Env::new(ScenarioConfig::default(), setup, seed).unwrap();
-    let m = fleet_lockstep(
-        setup,
-        seed,
-        steps,
-        test_domains::domain(1),
-        &env0,
-        Some(&path),
-        &["shield:=true"],
-    );
-    assert_same("policy+shield", &off, &m, steps);
+    let safety = Safety {
+        shield: true,
+        filter: None,
+    };
+    moves_policy_reproduces("policy+shield", 0, 1, safety, &["shield:=true"]);
 }
 
 #[test]
 fn orca_filtered_policy_fleet_in_lockstep_reproduces_the_offline_episode() {
-    let path = pretrained("smappo_moves_6.4_2.safetensors");
-    if !path.exists() {
-        eprintln!("SKIPPED: no bundled checkpoint at {}", path.display());
-        return;
-    }
-    let setup = Setup::new(6, 4, 2);
-    let (seed, steps) = (1, 200);
-    let off = offline_filtered(setup, seed, steps, &path);
-    let env0 = Env::new(ScenarioConfig::default(), setup, seed).unwrap();
-    let m = fleet_lockstep(
-        setup,
-        seed,
-        steps,
-        test_domains::domain(2),
-        &env0,
-        Some(&path),
-        &["orca_filter:=true"],
-    );
-    assert_same("policy+orca", &off, &m, steps);
+    let safety = Safety::filtered(FilterMargins::DEPLOYED);
+    moves_policy_reproduces("policy+orca", 1, 2, safety, &["orca_filter:=true"]);
 }
 
 #[test]
@@ -194,37 +155,26 @@ fn bundled_target_policy_fleet_in_lockstep_reproduces_the_offline_episode() {
     let (seed, steps) = (2, 200);
     let off = offline_targets(setup, seed, steps, &path);
     assert!(off.delivered > 0, "choose a seed where the policy delivers");
-    let env0 = Env::new(ScenarioConfig::default(), setup, seed).unwrap();
     // No parameters: the default (planner + 40 mm filter) is what is checked.
-    let m = fleet_lockstep(
-        setup,
-        seed,
-        steps,
-        test_domains::domain(3),
-        &env0,
-        Some(&path),
-        &[],
-    );
-    assert_same("target policy", &off, &m, steps);
+    LockstepRun {
+        policy: Some(&path),
+        ..LockstepRun::new(setup, seed, steps, test_domains::domain(3))
+    }
+    .assert_reproduces("target policy", &off);
 }
 
 #[test]
 fn matching_orca_fleet_in_lockstep_reproduces_the_offline_episode() {
     let setup = Setup::new(6, 4, 2);
     let (seed, steps) = (4, 200);
-    let (off, env0) = offline_matching_orca(setup, seed, steps);
+    let off = offline_matching_orca(setup, seed, steps);
     assert!(
         off.delivered > 0,
         "choose a seed where matching-orca delivers"
     );
-    let m = fleet_lockstep(
-        setup,
-        seed,
-        steps,
-        test_domains::domain(4),
-        &env0,
-        None,
-        &["controller:=matching-orca"],
-    );
-    assert_same("matching-orca", &off, &m, steps);
+    LockstepRun {
+        robot_params: &["controller:=matching-orca"],
+        ..LockstepRun::new(setup, seed, steps, test_domains::domain(4))
+    }
+    .assert_reproduces("matching-orca", &off);
 }

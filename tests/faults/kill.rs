@@ -184,13 +184,7 @@ fn metric_at(m: &[(u64, DiagnosticArray)], t: u64, key: &str) -> f64 {
     m.iter()
         .take_while(|(lt, _)| *lt <= t)
         .last()
-        .and_then(|(_, d)| {
-            d.status
-                .iter()
-                .flat_map(|s| s.values.iter())
-                .find(|kv| kv.key == key)
-                .and_then(|kv| kv.value.parse().ok())
-        })
+        .and_then(|(_, d)| d.number(key))
         .unwrap_or(0.0)
 }
 

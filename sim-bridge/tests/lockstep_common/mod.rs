@@ -49,30 +49,35 @@ impl Offline {
 
 /// An offline episode of `steps` steps of `setup` from `seed` (default scenario): `init`
 /// builds the controller from the first env, then every step `step` gets the controller,
-/// the observation batch and the env to step. Returns the metrics and the first env.
+/// the observation batch and the env to step. Returns the episode's metrics.
 pub fn offline_episode<C>(
     setup: Setup,
     seed: u64,
     steps: u32,
     init: impl FnOnce(&Env) -> C,
     mut step: impl FnMut(&mut C, &obs::ObsBatch, &mut Env),
-) -> (Offline, Env) {
+) -> Offline {
     let mut env = Env::new(ScenarioConfig::default(), setup, seed).unwrap();
-    let first = env.clone();
     let mut ctrl = init(&env);
     let mut batch = obs::ObsBatch::default();
     for _ in 0..steps {
         env.observe(&mut batch);
         step(&mut ctrl, &batch, &mut env);
     }
-    (Offline::of(&env), first)
+    Offline::of(&env)
 }
 
-/// A bundled checkpoint of policy/pretrained.
+/// A bundled checkpoint of policy/pretrained (committed: missing is a failure, not a skip).
 pub fn pretrained(file: &str) -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+    let p = PathBuf::from(env!("CARGO_MANIFEST_DIR"))
         .join("../policy/pretrained")
-        .join(file)
+        .join(file);
+    assert!(
+        p.exists(),
+        "the bundled checkpoint {} is missing",
+        p.display()
+    );
+    p
 }
 
 /// A checkpoint's policy with one recurrent state per robot of `env`.
@@ -123,19 +128,6 @@ impl Drop for Kill {
     }
 }
 
-/// Run the fleet in lockstep; returns the bridge's final metrics line.
-pub fn fleet_lockstep(
-    setup: Setup,
-    seed: u64,
-    steps: u32,
-    domain: u16,
-    env0: &Env,
-    policy: Option<&std::path::Path>,
-    extra: &[&str],
-) -> serde_json::Value {
-    fleet_lockstep_in(setup, seed, steps, domain, env0, policy, extra, &[], None)
-}
-
 /// The ROS 2 security environment of a process in enclave `enclave` of `keystore`
 /// (Enforce: a process that cannot join securely does not start).
 fn secure(cmd: &mut Command, keystore: &std::path::Path, enclave: &str) {
@@ -146,117 +138,155 @@ fn secure(cmd: &mut Command, keystore: &std::path::Path, enclave: &str) {
         .args(["--enclave", enclave]);
 }
 
-/// [`fleet_lockstep`], with `bridge_extra` parameters for the bridge (`NAME:=VALUE`, after
-/// the harness's own) and DDS Security when `keystore` is given (enclaves
-/// `/tending/robot_<i>` and `/tending/sim_bridge`, as `tending security create` makes).
-#[allow(clippy::too_many_arguments)]
-pub fn fleet_lockstep_in(
-    setup: Setup,
-    seed: u64,
-    steps: u32,
-    domain: u16,
-    env0: &Env,
-    policy: Option<&std::path::Path>,
-    extra: &[&str],
-    bridge_extra: &[&str],
-    keystore: Option<&std::path::Path>,
-) -> serde_json::Value {
-    let s = env0.sizes();
-    let f = |x: f32| format!("{:?}", x as f64);
-    let mut kids = Kill(Vec::new());
-    // Robot logs go to files, printed when a robot went missing or the bridge timed out
-    // waiting (a rare failure under load had nothing else to go on).
-    let logs =
-        std::env::temp_dir().join(format!("tending-lockstep-{}-{domain}", std::process::id()));
-    std::fs::create_dir_all(&logs).unwrap();
-    let log_of = |i: usize| logs.join(format!("robot_{i}.log"));
-    for i in 0..setup.robots {
-        let mut cmd = Command::new(robot_node_bin());
-        cmd.env("ROS_DOMAIN_ID", domain.to_string())
-            .args(["--ros-args", "-r", &format!("__ns:=/robot_{i}")])
-            .args(["-p", "lockstep:=true"])
-            .args(["-p", &format!("robot_radius:={}", f(s.robot_radius))])
-            .args(["-p", &format!("machine_half_x:={}", f(s.machine_half[0]))])
-            .args(["-p", &format!("machine_half_y:={}", f(s.machine_half[1]))])
-            .args(["-p", &format!("storage_half_x:={}", f(s.storage_half[0]))])
-            .args(["-p", &format!("storage_half_y:={}", f(s.storage_half[1]))])
-            .args(["-p", "stale_timeout_s:=5.0"])
-            .args(["--disable-rosout-logs"])
-            .stdout(Stdio::null())
-            .stderr(std::fs::File::create(log_of(i)).unwrap());
-        if let Some(p) = policy {
-            cmd.args(["-p", &format!("policy:={}", p.display())]);
+/// One lockstep run of a fleet: a `robot_node` per robot and `sim_bridge`, on `domain`,
+/// for `steps` steps of `setup` from `seed` (default scenario). Set the optional fields
+/// with struct update syntax: `LockstepRun { policy: Some(p), ..LockstepRun::new(..) }`.
+pub struct LockstepRun<'a> {
+    pub setup: Setup,
+    pub seed: u64,
+    pub steps: u32,
+    pub domain: u16,
+    /// Checkpoint every robot_node runs (`-p policy:=`); none: its scripted controller.
+    pub policy: Option<&'a std::path::Path>,
+    /// Extra robot_node parameters (`NAME:=VALUE`).
+    pub robot_params: &'a [&'a str],
+    /// Extra sim_bridge parameters, after the harness's own.
+    pub bridge_params: &'a [&'a str],
+    /// DDS Security from this keystore (enclaves `/tending/robot_<i>` and
+    /// `/tending/sim_bridge`, as `tending security create` makes them).
+    pub keystore: Option<&'a std::path::Path>,
+}
+
+impl<'a> LockstepRun<'a> {
+    pub fn new(setup: Setup, seed: u64, steps: u32, domain: u16) -> Self {
+        LockstepRun {
+            setup,
+            seed,
+            steps,
+            domain,
+            policy: None,
+            robot_params: &[],
+            bridge_params: &[],
+            keystore: None,
         }
-        for e in extra {
-            cmd.args(["-p", e]);
-        }
-        if let Some(ks) = keystore {
-            secure(&mut cmd, ks, &format!("/tending/robot_{i}"));
-        }
-        kids.0.push(cmd.spawn().unwrap());
     }
-    let mut bridge = Command::new(env!("CARGO_BIN_EXE_sim_bridge"));
-    bridge
-        .env("ROS_DOMAIN_ID", domain.to_string())
-        .args(["--ros-args", "-p", &format!("setup:={setup}")])
-        .args(["-p", &format!("seed:={seed}"), "-p", "mode:=lockstep"])
-        .args(["-p", &format!("max_steps:={steps}")])
-        .args(["-p", "settle_s:=2.0", "-p", "lockstep_timeout_s:=3.0"])
-        .args(["-p", "stale_timeout_s:=10.0", "--disable-rosout-logs"])
-        .stdout(Stdio::piped())
-        .stderr(std::fs::File::create(logs.join("sim_bridge.log")).unwrap());
-    if let Some(ks) = keystore {
-        // Authentication and key exchange between every pair of participants come first;
-        // a handshake whose messages are lost under load is retried once a second, so
-        // the first answers are waited for longer, as `tending fleet --secure` does.
-        bridge.args(["-p", "settle_s:=8.0", "-p", "startup_grace_s:=30.0"]);
-        secure(&mut bridge, ks, "/tending/sim_bridge");
+
+    /// Runs the fleet and asserts it reproduced the offline episode `off` exactly.
+    pub fn assert_reproduces(&self, name: &str, off: &Offline) {
+        let m = self.run();
+        assert_same(name, off, &m, self.steps);
     }
-    for e in bridge_extra {
-        bridge.args(["-p", e]);
-    }
-    let mut bridge = bridge.spawn().unwrap();
-    let out = bridge.stdout.take().unwrap();
-    let (tx, rx) = std::sync::mpsc::channel();
-    std::thread::spawn(move || {
-        for line in BufReader::new(out).lines().map_while(Result::ok) {
-            let _ = tx.send(line);
-        }
-    });
-    let deadline = Instant::now() + Duration::from_secs(240);
-    let mut last: Option<serde_json::Value> = None;
-    loop {
-        match rx.recv_timeout(Duration::from_millis(200)) {
-            Ok(line) => {
-                if let Ok(v) = serde_json::from_str::<serde_json::Value>(&line) {
-                    last = Some(v);
-                }
+
+    /// Runs the fleet; returns the bridge's final metrics line.
+    pub fn run(&self) -> serde_json::Value {
+        let LockstepRun {
+            setup,
+            seed,
+            steps,
+            domain,
+            policy,
+            robot_params: extra,
+            bridge_params: bridge_extra,
+            keystore,
+        } = *self;
+        let env0 = Env::new(ScenarioConfig::default(), setup, seed).unwrap();
+        let s = env0.sizes();
+        let f = |x: f32| format!("{:?}", x as f64);
+        let mut kids = Kill(Vec::new());
+        // Robot logs go to files, printed when a robot went missing or the bridge timed out
+        // waiting (a rare failure under load had nothing else to go on).
+        let logs =
+            std::env::temp_dir().join(format!("tending-lockstep-{}-{domain}", std::process::id()));
+        std::fs::create_dir_all(&logs).unwrap();
+        let log_of = |i: usize| logs.join(format!("robot_{i}.log"));
+        for i in 0..setup.robots {
+            let mut cmd = Command::new(robot_node_bin());
+            cmd.env("ROS_DOMAIN_ID", domain.to_string())
+                .args(["--ros-args", "-r", &format!("__ns:=/robot_{i}")])
+                .args(["-p", "lockstep:=true"])
+                .args(["-p", &format!("robot_radius:={}", f(s.robot_radius))])
+                .args(["-p", &format!("machine_half_x:={}", f(s.machine_half[0]))])
+                .args(["-p", &format!("machine_half_y:={}", f(s.machine_half[1]))])
+                .args(["-p", &format!("storage_half_x:={}", f(s.storage_half[0]))])
+                .args(["-p", &format!("storage_half_y:={}", f(s.storage_half[1]))])
+                .args(["-p", "stale_timeout_s:=5.0"])
+                .args(["--disable-rosout-logs"])
+                .stdout(Stdio::null())
+                .stderr(std::fs::File::create(log_of(i)).unwrap());
+            if let Some(p) = policy {
+                cmd.args(["-p", &format!("policy:={}", p.display())]);
             }
-            Err(std::sync::mpsc::RecvTimeoutError::Disconnected) => break,
-            Err(_) => {}
+            for e in extra {
+                cmd.args(["-p", e]);
+            }
+            if let Some(ks) = keystore {
+                secure(&mut cmd, ks, &format!("/tending/robot_{i}"));
+            }
+            kids.0.push(cmd.spawn().unwrap());
         }
-        if Instant::now() > deadline {
-            let _ = bridge.kill();
-            drop(kids);
+        let mut bridge = Command::new(env!("CARGO_BIN_EXE_sim_bridge"));
+        bridge
+            .env("ROS_DOMAIN_ID", domain.to_string())
+            .args(["--ros-args", "-p", &format!("setup:={setup}")])
+            .args(["-p", &format!("seed:={seed}"), "-p", "mode:=lockstep"])
+            .args(["-p", &format!("max_steps:={steps}")])
+            .args(["-p", "settle_s:=2.0", "-p", "lockstep_timeout_s:=3.0"])
+            .args(["-p", "stale_timeout_s:=10.0", "--disable-rosout-logs"])
+            .stdout(Stdio::piped())
+            .stderr(std::fs::File::create(logs.join("sim_bridge.log")).unwrap());
+        if let Some(ks) = keystore {
+            // Authentication and key exchange between every pair of participants come first;
+            // a handshake whose messages are lost under load is retried once a second, so
+            // the first answers are waited for longer, as `tending fleet --secure` does.
+            bridge.args(["-p", "settle_s:=8.0", "-p", "startup_grace_s:=30.0"]);
+            secure(&mut bridge, ks, "/tending/sim_bridge");
+        }
+        for e in bridge_extra {
+            bridge.args(["-p", e]);
+        }
+        let mut bridge = bridge.spawn().unwrap();
+        let out = bridge.stdout.take().unwrap();
+        let (tx, rx) = std::sync::mpsc::channel();
+        std::thread::spawn(move || {
+            for line in BufReader::new(out).lines().map_while(Result::ok) {
+                let _ = tx.send(line);
+            }
+        });
+        let deadline = Instant::now() + Duration::from_secs(240);
+        let mut last: Option<serde_json::Value> = None;
+        loop {
+            match rx.recv_timeout(Duration::from_millis(200)) {
+                Ok(line) => {
+                    if let Ok(v) = serde_json::from_str::<serde_json::Value>(&line) {
+                        last = Some(v);
+                    }
+                }
+                Err(std::sync::mpsc::RecvTimeoutError::Disconnected) => break,
+                Err(_) => {}
+            }
+            if Instant::now() > deadline {
+                let _ = bridge.kill();
+                drop(kids);
+                print_logs(&logs, setup.robots);
+                panic!("bridge did not finish {steps} steps in time; last metrics {last:?}");
+            }
+        }
+        let status = bridge.wait().unwrap();
+        drop(kids);
+        if !status.success() {
             print_logs(&logs, setup.robots);
-            panic!("bridge did not finish {steps} steps in time; last metrics {last:?}");
+            panic!("sim_bridge exited with {status}; last metrics {last:?}");
         }
+        let troubled = last
+            .as_ref()
+            .is_some_and(|m| m["despawned"] != 0 || m["lockstep_timeouts"] != 0);
+        if troubled {
+            print_logs(&logs, setup.robots);
+        } else {
+            let _ = std::fs::remove_dir_all(&logs);
+        }
+        last.expect("no metrics line from sim_bridge")
     }
-    let status = bridge.wait().unwrap();
-    drop(kids);
-    if !status.success() {
-        print_logs(&logs, setup.robots);
-        panic!("sim_bridge exited with {status}; last metrics {last:?}");
-    }
-    let troubled = last
-        .as_ref()
-        .is_some_and(|m| m["despawned"] != 0 || m["lockstep_timeouts"] != 0);
-    if troubled {
-        print_logs(&logs, setup.robots);
-    } else {
-        let _ = std::fs::remove_dir_all(&logs);
-    }
-    last.expect("no metrics line from sim_bridge")
 }
 
 /// The telling lines of the bridge's and every robot's log (a rare failure under load had
