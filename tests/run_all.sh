@@ -86,6 +86,44 @@ export TENDING_BIN_DIR="${TENDING_BIN_DIR:-$(cd "${CARGO_TARGET_DIR:-target}/rel
 export RMW_IMPLEMENTATION=rmw_fastrtps_cpp
 unset ROS_LOCALHOST_ONLY ROS_AUTOMATIC_DISCOVERY_RANGE ROS_STATIC_PEERS FASTRTPS_DEFAULT_PROFILES_FILE
 
+# Vendored rustdds (third_party/, ADR 0005): the start-up deadlock regression tests, the
+# DATA_FRAG tests (an encrypted fragment run must survive deserialization) and the
+# crypto-handle test (a re-created writer must register), the reader-cache tests (built-in
+# readers must not lose unread discovery or key-exchange samples), the Cyclone DDS interop
+# fixes (handshake tokens without the optional DH keys, NUL-terminated algorithm names, no
+# crypto token of kind NONE, the final DATA_FRAG padded to 4 bytes; issue 38), with the
+# security feature the fleet builds it with. Run from a copy outside the workspace: cargo
+# refuses a nested package that is not a member. Built in the dev profile without
+# debuginfo: these are logic regression tests (they pass in 2 s either way), and an
+# unoptimised build of rustdds and its ~120 dependencies takes 1.5 min here against 3-4 min
+# optimised. JOBS: cargo build jobs.
+rustdds_tests() {
+    local rdds
+    rdds="$(mktemp -d)"
+    cp -r third_party/rustdds/. "$rdds"
+    CARGO_TARGET_DIR="$PWD/target/third_party" cargo test --locked -j "$1" \
+        --config 'profile.dev.debug=0' \
+        --manifest-path "$rdds/Cargo.toml" --features security --lib -- \
+        discovery::discovery::tests::announcing_a_local_writer_holds_no_lock_across_blocking_sends \
+        discovery::discovery::tests::the_published_announce_code_path_deadlocks_and_the_test_sees_it \
+        messages::submessages::data_frag::tests \
+        security::cryptographic::cryptographic_builtin::crypto_key_factory::tests \
+        structure::dds_cache::tests \
+        discovery::discovery::tests::sedp_topic_caches_get_sedp_reader_limits \
+        security::authentication::authentication_builtin::types::tests \
+        security::cryptographic::cryptographic_builtin::key_material::tests \
+        rtps::message::tests::the_final_data_frag_of_an_unaligned_sample_is_padded_to_4_bytes \
+        || { rm -rf "$rdds"; return 1; }
+    rm -rf "$rdds"
+}
+# wait_logged PID LOG WHAT: wait for a background section, show its output, stop on failure.
+wait_logged() {
+    local ok=0
+    wait "$1" || ok=$?
+    cat "$2"
+    [ "$ok" = 0 ] || { echo "$3 failed (exit $ok)"; exit 1; }
+}
+
 # cargo-nextest (part of this machine kind) runs the tests several at once, each in a
 # process of its own: the real-time ROS 2 tests mostly wait on wall-clock time, and one
 # after another they took ~370 s of the suite (.config/nextest.toml, docs/bench/suite.md).
@@ -100,50 +138,29 @@ if cargo nextest --version >/dev/null 2>&1; then
     py_log="target/python-ros-tests.log"
     python_ros_tests >"$py_log" 2>&1 &
     py_pid=$!
-    trap 'kill "$venv_pid" "$py_pid" 2>/dev/null || true' EXIT
-    section "cargo nextest run --workspace --release (python ROS tests beside it)"
+    # The real-time tests leave most of a core idle: the vendored rustdds tests build
+    # there, one job, in a target directory of their own.
+    rdds_log="target/rustdds-tests.log"
+    rustdds_tests 1 >"$rdds_log" 2>&1 &
+    rdds_pid=$!
+    trap 'kill "$venv_pid" "$py_pid" "$rdds_pid" 2>/dev/null || true' EXIT
+    section "cargo nextest run --workspace --release (python ROS tests and the rustdds build beside it)"
     cargo nextest run --workspace --release --locked --build-jobs 2 --no-fail-fast 2>&1
     section "cargo test --doc --workspace --release (nextest does not run doctests)"
     cargo test --workspace --release --locked -j 2 --doc 2>&1
     section "python ROS tests (tests/interop, tests/bags), run beside nextest"
-    py_ok=0
-    wait "$py_pid" || py_ok=$?
-    cat "$py_log"
-    [ "$py_ok" = 0 ] || { echo "python ROS tests failed (exit $py_ok)"; exit 1; }
+    wait_logged "$py_pid" "$py_log" "python ROS tests"
+    section "vendored rustdds tests, built beside nextest"
+    wait_logged "$rdds_pid" "$rdds_log" "vendored rustdds tests"
 else
     section "cargo test --workspace --release (cargo-nextest not installed: one binary at a time)"
     cargo test --workspace --release --locked -j 2 2>&1
     section "python ROS tests (tests/interop, tests/bags)"
     wait_venvs
     python_ros_tests
+    section "vendored rustdds tests"
+    rustdds_tests 2
 fi
-
-# Vendored rustdds (third_party/, ADR 0005): the start-up deadlock regression tests, the
-# DATA_FRAG tests (an encrypted fragment run must survive deserialization) and the
-# crypto-handle test (a re-created writer must register), the reader-cache tests (built-in
-# readers must not lose unread discovery or key-exchange samples), the Cyclone DDS interop
-# fixes (handshake tokens without the optional DH keys, NUL-terminated algorithm names, no
-# crypto token of kind NONE, the final DATA_FRAG padded to 4 bytes; issue 38), with the
-# security feature the
-# fleet builds it with. Run from a copy outside the workspace: cargo refuses a nested
-# package that is not a member. Built in the dev profile without debuginfo: these are logic
-# regression tests (they pass in 2 s either way), and an unoptimised build of rustdds and
-# its ~120 dependencies takes 1.5 min here against 3-4 min optimised.
-section "cargo test: vendored rustdds, discovery deadlock, DATA_FRAG, crypto-handle and reader-cache regressions"
-rdds="$(mktemp -d)"
-cp -r third_party/rustdds/. "$rdds"
-CARGO_TARGET_DIR="$PWD/target/third_party" cargo test --locked -j 2 --config 'profile.dev.debug=0' \
-    --manifest-path "$rdds/Cargo.toml" --features security --lib -- \
-    discovery::discovery::tests::announcing_a_local_writer_holds_no_lock_across_blocking_sends \
-    discovery::discovery::tests::the_published_announce_code_path_deadlocks_and_the_test_sees_it \
-    messages::submessages::data_frag::tests \
-    security::cryptographic::cryptographic_builtin::crypto_key_factory::tests \
-    structure::dds_cache::tests \
-    discovery::discovery::tests::sedp_topic_caches_get_sedp_reader_limits \
-    security::authentication::authentication_builtin::types::tests \
-    security::cryptographic::cryptographic_builtin::key_material::tests \
-    rtps::message::tests::the_final_data_frag_of_an_unaligned_sample_is_padded_to_4_bytes 2>&1
-rm -rf "$rdds"
 
 # Python: the `tending` package (python/: PyO3 + maturin) built from the checkout with
 # `pip install ./python` into its own venv (same reinstall rule for the test
