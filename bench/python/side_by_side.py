@@ -2,7 +2,7 @@
 """Our Rust tending simulator side by side with its VMAS twin (issue 37): env-stepping
 throughput, then the same stock BenchMARL MAPPO run on each, one after the other.
 
-    nice -n 19 target/venv-torchrl/bin/python bench/python/side_by_side.py --frames 64000
+    nice -n 19 target/venv-torchrl/bin/python bench/python/side_by_side.py --frames 128000
 
 1. Env stepping: TorchRL ``rollout`` with random actions of ``tending.torchrl.TendingEnv``
    and of TorchRL's ``VmasEnv`` over ``vmas_tending.TendingScenario``, at each of
@@ -188,13 +188,17 @@ def plot(out: Path, setup: str, seed: int):
     import matplotlib.pyplot as plt
 
     rows = read_iterations(out)
+    total = {}  # training wall time to the last frame (iterations.csv stops at the last batch)
+    if (out / "summary.csv").exists():
+        with open(out / "summary.csv") as f:
+            total = {r["sim"]: float(r["wall_s"]) for r in csv.DictReader(f)}
     fig, axes = plt.subplots(1, 2, figsize=(11, 4.2))
     for sim in SIMS:
         mine = [r for r in rows if r["sim"] == sim]
         if not mine:
             continue
         x = [int(r["frames"]) for r in mine]
-        wall = float(mine[-1]["wall_s"])
+        wall = total.get(sim, float(mine[-1]["wall_s"]))
         label = f"{LABEL[sim]}: {x[-1]:,} frames in {wall:.0f} s"
         axes[0].plot(x, [float(r["team_reward"]) for r in mine], marker="o", label=label)
         axes[1].plot(x, [float(r["parts_delivered"]) for r in mine], marker="o", label=label)
@@ -214,7 +218,7 @@ def plot(out: Path, setup: str, seed: int):
 def main(argv=None):
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--setup", default="6.4_2")
-    p.add_argument("--frames", type=int, default=64_000, help="training frames per simulator")
+    p.add_argument("--frames", type=int, default=128_000, help="training frames per simulator")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--n-envs", type=int, default=32, help="training envs (batch: 200 x this)")
     p.add_argument("--threads", type=int, default=1, help="torch threads while training")

@@ -20,7 +20,7 @@ command of ``k_speed`` (0.5 m/s). VMAS's own discretisation of a 1-D action with
 gives u in {0, -1, -0.5, 0.5, 1} for actions 0..4; :class:`VelocityTracker` (a VMAS
 ``Dynamics``) decodes that back to the action index and turns its velocity command into a
 force the way our simulator does (the force that reaches the command after this step's
-drag, norm capped at ``max_force``). Continuous actions are refused.
+drag, norm capped at ``max_force``). The BenchMARL task refuses continuous actions.
 
 Observation per robot, a flat float vector (``obs_layout``):
 
