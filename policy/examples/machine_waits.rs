@@ -36,21 +36,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let seed: u64 = args.get(3).map_or(Ok(0), |s| s.parse())?;
     let ctrl = Method::script_or_filtered_checkpoint(ck)?;
     let cfg = ScenarioConfig::default();
-    // [first, at-box, en-route, none-free]
-    let mut waits = [0u64; 4];
-    let (mut parts, mut stranded, mut machine_steps) = (0u64, 0u64, 0u64);
-    let mut idle_steps = 0u64;
-    // robot-steps carrying or matched away from every box, and those moving < 1/3 step
-    let (mut moving_steps, mut crawl_steps) = (0u64, 0u64);
-    let mut robot_steps = 0u64;
-    // en-route steps with a robot matched to the machine, and that robot's distance in steps
-    let (mut heading, mut heading_steps) = (0u64, 0.0f64);
-    // en-route steps with a part-less robot parked at a busy machine (within `near` of it),
-    // the steps until that machine is ready summed, and with a part-less robot unmatched
-    let (mut parked, mut parked_wait, mut spare) = (0u64, 0.0f64, 0u64);
-    // per machine cycle (pick to the next robot in reach): how often the robot matched to
-    // it changed, split by whether a robot was in reach when the part became ready
-    let (mut on_time, mut late, mut switches_on_time, mut switches_late) = (0u64, 0u64, 0u64, 0u64);
+    let mut c = Counts::default();
     let mut batch = obs::ObsBatch::default();
     let scene: Option<(u64, usize, u32, u32)> = std::env::var("SCENE").ok().and_then(|s| {
         let v: Vec<u64> = s.split(',').filter_map(|x| x.parse().ok()).collect();
@@ -115,57 +101,17 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                 // SCENE=ep,robot,from,to: that robot's surroundings step by step
                 if let Some((e, i, t0, t1)) = scene.filter(|s| s.0 == ep) {
                     if (t0..=t1).contains(&t) {
-                        let r = &robots[i];
-                        let mut near_peers: Vec<(f32, usize)> = robots
-                            .iter()
-                            .enumerate()
-                            .filter(|&(k, _)| k != i)
-                            .map(|(k, q)| {
-                                (
-                                    plan::geom::norm([q.pos[0] - r.pos[0], q.pos[1] - r.pos[1]]),
-                                    k,
-                                )
-                            })
-                            .collect();
-                        near_peers.sort_by(|a, b| a.0.total_cmp(&b.0));
-                        let peers: Vec<String> = near_peers
-                            .iter()
-                            .take(4)
-                            .map(|(d, k)| {
-                                format!("r{k}{} {d:.3}", if robots[*k].has_part { "*" } else { "" })
-                            })
-                            .collect();
-                        let boxes: Vec<String> = machines
-                            .iter()
-                            .enumerate()
-                            .map(|(j, m)| (j, plan::geom::box_distance(m.centre, m.half, r.pos)))
-                            .filter(|(_, d)| *d < 0.3)
-                            .map(|(j, d)| {
-                                format!(
-                                    "m{j} {d:.3}{}",
-                                    if machines[j].part_ready { "R" } else { "" }
-                                )
-                            })
-                            .collect();
-                        println!(
-                            "ep {e} t {t} r{i}{} at ({:.3}, {:.3}) matched {:?} act {:?} | peers {} | machines {}",
-                            if r.has_part { "*" } else { "" },
-                            r.pos[0],
-                            r.pos[1],
-                            matched[i],
-                            last_actions.borrow().get(i),
-                            peers.join(", "),
-                            boxes.join(", ")
-                        );
+                        let act = last_actions.borrow().get(i).copied();
+                        print_scene(e, t, i, &robots, &machines, matched[i], act);
                     }
                 }
                 for (j, m) in machines.iter().enumerate() {
                     let to_j = (0..robots.len()).find(|&i| matched[i] == Some(j));
-                    let c = &mut cycle[j];
-                    if to_j.is_some() && c.0.is_some() && to_j != c.0 {
-                        c.1 += 1;
+                    let cy = &mut cycle[j];
+                    if to_j.is_some() && cy.0.is_some() && to_j != cy.0 {
+                        cy.1 += 1;
                     }
-                    c.0 = to_j;
+                    cy.0 = to_j;
                     if trace {
                         let r = to_j.map_or("-".to_string(), |i| {
                             let acts = last_actions.borrow();
@@ -190,31 +136,31 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                         !r.has_part && plan::geom::box_distance(m.centre, m.half, r.pos) <= near
                     });
                     if m.part_ready && !in_reach {
-                        c.2 = true;
+                        cy.2 = true;
                     }
                     let picked = !m.part_ready && (last_ready[j] || m.timer > last_timer[j]);
                     last_timer[j] = m.timer;
                     if picked {
                         if picked_once[j] {
-                            if c.2 {
+                            if cy.2 {
                                 if trace {
                                     println!("ep {ep} t {t} machine {j}: {}", history[j].join(" "));
                                 }
-                                late += 1;
-                                switches_late += c.1;
+                                c.late += 1;
+                                c.switches_late += cy.1;
                             } else {
-                                on_time += 1;
-                                switches_on_time += c.1;
+                                c.on_time += 1;
+                                c.switches_on_time += cy.1;
                             }
                         }
-                        *c = (None, 0, false);
+                        *cy = (None, 0, false);
                         if trace {
                             history[j].clear();
                         }
                         picked_once[j] = true;
                     }
                     last_ready[j] = m.part_ready;
-                    machine_steps += 1;
+                    c.machine_steps += 1;
                     if !m.part_ready {
                         continue;
                     }
@@ -227,76 +173,161 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                     } else {
                         2
                     };
-                    waits[class] += 1;
+                    c.waits[class] += 1;
                     if class == 2 {
-                        let parked_soonest = robots
-                            .iter()
-                            .filter(|r| !r.has_part)
-                            .filter_map(|r| {
-                                machines.iter().find(|k| {
-                                    !k.part_ready
-                                        && plan::geom::box_distance(k.centre, k.half, r.pos) <= near
-                                })
-                            })
-                            .map(|k| k.timer)
-                            .min();
-                        if let Some(w) = parked_soonest {
-                            parked += 1;
-                            parked_wait += w as f64;
-                        }
-                        if (0..robots.len()).any(|i| !robots[i].has_part && matched[i].is_none()) {
-                            spare += 1;
-                        }
+                        c.en_route(&robots, &machines, &matched, near);
                     }
                     if let Some(i) = to_j.filter(|_| class == 2) {
-                        heading += 1;
-                        heading_steps += (plan::geom::box_distance(m.centre, m.half, robots[i].pos)
-                            / step) as f64;
+                        c.heading += 1;
+                        c.heading_steps +=
+                            (plan::geom::box_distance(m.centre, m.half, robots[i].pos) / step)
+                                as f64;
                     }
                 }
                 final_carried = robots.iter().filter(|r| r.has_part).count() as u64;
-                // crawling: carrying or matched, away from every box, and moving less than
-                // a third of a full step
                 let storages: Vec<_> = env.storages().collect();
-                for (i, r) in robots.iter().enumerate() {
-                    let busy = r.has_part || matched[i].is_some();
-                    let away = machines
-                        .iter()
-                        .map(|m| plan::geom::box_distance(m.centre, m.half, r.pos))
-                        .chain(
-                            storages
-                                .iter()
-                                .map(|s| plan::geom::box_distance(s.centre, s.half, r.pos)),
-                        )
-                        .all(|d| d > near);
-                    let slow = last_pos.get(i).is_some_and(|q| {
-                        plan::geom::norm([q[0] - r.pos[0], q[1] - r.pos[1]]) < step / 3.0
-                    });
-                    if busy && away {
-                        moving_steps += 1;
-                        if slow {
-                            crawl_steps += 1;
-                        }
-                    }
-                }
+                c.crawling(
+                    &robots, &machines, &storages, &matched, &last_pos, near, step,
+                );
                 last_pos = robots.iter().map(|r| r.pos).collect();
-                idle_steps += robots.iter().filter(|r| !r.has_part).count() as u64;
-                robot_steps += robots.len() as u64;
+                c.idle_steps += robots.iter().filter(|r| !r.has_part).count() as u64;
+                c.robot_steps += robots.len() as u64;
             },
             |_, a| *last_actions.borrow_mut() = a.to_vec(),
         )?;
-        parts += m.parts_delivered as u64;
-        stranded += final_carried;
+        c.parts += m.parts_delivered as u64;
+        c.stranded += final_carried;
     }
-    let e = episodes as f64;
-    let m = (setup.machines as f64) * e;
-    println!(
-        "{setup} {ck} ({episodes} episodes, seed {seed}): parts {:.1}, stranded {:.2} per episode, robots part-less {:.1} % of steps",
-        parts as f64 / e,
-        stranded as f64 / e,
-        100.0 * idle_steps as f64 / robot_steps.max(1) as f64
+    c.report(
+        &format!("{setup} {ck} ({episodes} episodes, seed {seed})"),
+        setup,
+        episodes,
     );
-    println!(
+    Ok(())
+}
+
+/// Totals over all episodes.
+#[derive(Default)]
+struct Counts {
+    /// ready-part steps: [first, at-box, en-route, none-free]
+    waits: [u64; 4],
+    parts: u64,
+    stranded: u64,
+    machine_steps: u64,
+    idle_steps: u64,
+    /// robot-steps carrying or matched away from every box, and those moving < 1/3 step
+    moving_steps: u64,
+    crawl_steps: u64,
+    robot_steps: u64,
+    /// en-route steps with a robot matched to the machine, and that robot's distance in steps
+    heading: u64,
+    heading_steps: f64,
+    /// en-route steps with a part-less robot parked at a busy machine (within `near` of it),
+    /// the steps until that machine is ready summed, and with a part-less robot unmatched
+    parked: u64,
+    parked_wait: f64,
+    spare: u64,
+    /// per machine cycle (pick to the next robot in reach): how often the robot matched to
+    /// it changed, split by whether a robot was in reach when the part became ready
+    on_time: u64,
+    late: u64,
+    switches_on_time: u64,
+    switches_late: u64,
+}
+
+impl Counts {
+    /// An en-route step: is a part-less robot parked at another, busy machine, or unmatched?
+    fn en_route(
+        &mut self,
+        robots: &[sim::RobotView],
+        machines: &[sim::MachineView],
+        matched: &[Option<usize>],
+        near: f32,
+    ) {
+        let parked_soonest = robots
+            .iter()
+            .filter(|r| !r.has_part)
+            .filter_map(|r| {
+                machines.iter().find(|k| {
+                    !k.part_ready && plan::geom::box_distance(k.centre, k.half, r.pos) <= near
+                })
+            })
+            .map(|k| k.timer)
+            .min();
+        if let Some(w) = parked_soonest {
+            self.parked += 1;
+            self.parked_wait += w as f64;
+        }
+        if (0..robots.len()).any(|i| !robots[i].has_part && matched[i].is_none()) {
+            self.spare += 1;
+        }
+    }
+
+    /// Crawling: robots carrying or matched, away from every box, and moving less than a
+    /// third of a full step.
+    #[allow(clippy::too_many_arguments)]
+    fn crawling(
+        &mut self,
+        robots: &[sim::RobotView],
+        machines: &[sim::MachineView],
+        storages: &[sim::StorageView],
+        matched: &[Option<usize>],
+        last_pos: &[[f32; 2]],
+        near: f32,
+        step: f32,
+    ) {
+        for (i, r) in robots.iter().enumerate() {
+            let busy = r.has_part || matched[i].is_some();
+            let away = machines
+                .iter()
+                .map(|m| plan::geom::box_distance(m.centre, m.half, r.pos))
+                .chain(
+                    storages
+                        .iter()
+                        .map(|s| plan::geom::box_distance(s.centre, s.half, r.pos)),
+                )
+                .all(|d| d > near);
+            let slow = last_pos
+                .get(i)
+                .is_some_and(|q| plan::geom::norm([q[0] - r.pos[0], q[1] - r.pos[1]]) < step / 3.0);
+            if busy && away {
+                self.moving_steps += 1;
+                if slow {
+                    self.crawl_steps += 1;
+                }
+            }
+        }
+    }
+
+    fn report(&self, label: &str, setup: Setup, episodes: u64) {
+        let Counts {
+            waits,
+            parts,
+            stranded,
+            machine_steps,
+            idle_steps,
+            moving_steps,
+            crawl_steps,
+            robot_steps,
+            heading,
+            heading_steps,
+            parked,
+            parked_wait,
+            spare,
+            on_time,
+            late,
+            switches_on_time,
+            switches_late,
+        } = *self;
+        let e = episodes as f64;
+        let m = (setup.machines as f64) * e;
+        println!(
+            "{label}: parts {:.1}, stranded {:.2} per episode, robots part-less {:.1} % of steps",
+            parts as f64 / e,
+            stranded as f64 / e,
+            100.0 * idle_steps as f64 / robot_steps.max(1) as f64
+        );
+        println!(
         "  ready-part steps per machine per episode: first {:.1}, at-box {:.1}, en-route {:.1}, none-free {:.1} (of {:.0} steps)",
         waits[0] as f64 / m,
         waits[1] as f64 / m,
@@ -304,26 +335,78 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         waits[3] as f64 / m,
         machine_steps as f64 / m
     );
-    println!(
+        println!(
         "  en-route steps with a part-less robot matched to the machine: {:.1} % of them, that robot {:.1} steps from the box on average",
         100.0 * heading as f64 / waits[2].max(1) as f64,
         heading_steps / heading.max(1) as f64
     );
-    println!(
+        println!(
         "  en-route steps with a part-less robot parked at a busy machine: {:.1} % (that machine ready in {:.1} steps, the soonest); with a part-less robot unmatched: {:.1} %",
         100.0 * parked as f64 / waits[2].max(1) as f64,
         parked_wait / parked.max(1) as f64,
         100.0 * spare as f64 / waits[2].max(1) as f64
     );
-    println!(
+        println!(
         "  robots carrying or matched, away from every box: {:.1} % of robot-steps, {:.1} % of those moving less than a third of a step",
         100.0 * moving_steps as f64 / robot_steps.max(1) as f64,
         100.0 * crawl_steps as f64 / moving_steps.max(1) as f64
     );
-    println!(
+        println!(
         "  machine cycles (pick to pick, after the first): {on_time} with a part-less robot in reach whenever the part was ready, {late} without; matched-robot changes per cycle: {:.2} / {:.2}",
         switches_on_time as f64 / on_time.max(1) as f64,
         switches_late as f64 / late.max(1) as f64
     );
-    Ok(())
+    }
+}
+
+/// One step of robot `i`'s surroundings (SCENE): its nearest peers and the machines near it.
+fn print_scene(
+    e: u64,
+    t: u32,
+    i: usize,
+    robots: &[sim::RobotView],
+    machines: &[sim::MachineView],
+    matched: Option<usize>,
+    last_action: Option<u8>,
+) {
+    let r = &robots[i];
+    let mut near_peers: Vec<(f32, usize)> = robots
+        .iter()
+        .enumerate()
+        .filter(|&(k, _)| k != i)
+        .map(|(k, q)| {
+            (
+                plan::geom::norm([q.pos[0] - r.pos[0], q.pos[1] - r.pos[1]]),
+                k,
+            )
+        })
+        .collect();
+    near_peers.sort_by(|a, b| a.0.total_cmp(&b.0));
+    let peers: Vec<String> = near_peers
+        .iter()
+        .take(4)
+        .map(|(d, k)| format!("r{k}{} {d:.3}", if robots[*k].has_part { "*" } else { "" }))
+        .collect();
+    let boxes: Vec<String> = machines
+        .iter()
+        .enumerate()
+        .map(|(j, m)| (j, plan::geom::box_distance(m.centre, m.half, r.pos)))
+        .filter(|(_, d)| *d < 0.3)
+        .map(|(j, d)| {
+            format!(
+                "m{j} {d:.3}{}",
+                if machines[j].part_ready { "R" } else { "" }
+            )
+        })
+        .collect();
+    println!(
+        "ep {e} t {t} r{i}{} at ({:.3}, {:.3}) matched {:?} act {:?} | peers {} | machines {}",
+        if r.has_part { "*" } else { "" },
+        r.pos[0],
+        r.pos[1],
+        matched,
+        last_action,
+        peers.join(", "),
+        boxes.join(", ")
+    );
 }
