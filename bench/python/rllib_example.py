@@ -1,4 +1,4 @@
-"""Train a shared PPO policy with Ray RLlib on the tending env for a few iterations: the
+"""Train a shared PPO policy with Ray RLlib on the tending env: the
 scale-out path (RLlib's env runners are Ray actors, so the same script runs on a cluster
 with more `--runners`).
 
@@ -9,15 +9,18 @@ RLModule (a set encoder like SMAPPO's), out of scope for an example.
 
 After training, the learned policy's greedy (argmax) actions are run for a few episodes
 in the env and its parts delivered are printed next to random actions and the scripted
-greedy baseline, so the figures say honestly how far a few iterations get.
+greedy baseline, so the figures say honestly how far the training got.
 
 Usage (bench/python/run.sh does it): python bench/python/rllib_example.py --iters 10
+(`--csv`/`--png`: the per-iteration figures as a table and, with matplotlib, a plot;
+`--minutes` caps the training time. docs/bench/python.md has a 32-minute run.)
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import os
 import time
 
 import numpy as np
@@ -31,6 +34,23 @@ def make_env(cfg):
     return ParallelPettingZooEnv(
         tending.parallel_env(cfg.get("setup", "6.4_2"), seed=cfg.get("seed", 0), obs_layout="flat")
     )
+
+
+EPISODE_STEPS = 200  # the scenario's episode length
+
+
+def parts_logger(window):
+    """An `on_episode_end` callback logging the finished training episode's parts delivered
+    (every robot's info carries the episode metrics), averaged over the last `window`
+    episodes like RLlib's episode return."""
+
+    def on_episode_end(episode, metrics_logger=None, **kw):
+        infos = episode.get_infos(-1)
+        m = next((i["metrics"] for i in infos.values() if isinstance(i, dict) and "metrics" in i), None)
+        if m is not None and metrics_logger is not None:
+            metrics_logger.log_value("parts_delivered", m["parts_delivered"], window=window)
+
+    return on_episode_end
 
 
 def evaluate(policy, setup, episodes, seed=1000):
@@ -55,12 +75,16 @@ def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--setup", default="6.4_2")
     ap.add_argument("--iters", type=int, default=10)
+    ap.add_argument("--minutes", type=float, default=None,
+                    help="stop training after this many minutes even if --iters are not done")
     ap.add_argument("--runners", type=int, default=2, help="RLlib env runners (Ray actors)")
     ap.add_argument("--batch", type=int, default=2400,
                     help="env steps per training batch (x robots = agent-steps)")
     ap.add_argument("--eval-episodes", type=int, default=5)
     ap.add_argument("--json", default=None, help="write the figures here")
     ap.add_argument("--md", default=None, help="append a markdown section of the figures here")
+    ap.add_argument("--csv", default=None, help="write the per-iteration figures here")
+    ap.add_argument("--png", default=None, help="plot return and parts per iteration here")
     a = ap.parse_args()
 
     import ray
@@ -72,12 +96,16 @@ def main():
 
     ray.init(num_cpus=max(2, a.runners + 1), include_dashboard=False, log_to_driver=False)
     register_env("tending", make_env)
+    window = max(1, a.batch // EPISODE_STEPS)
     config = (
         PPOConfig()
         .environment("tending", env_config={"setup": a.setup, "seed": 0})
         .multi_agent(policies={"shared"}, policy_mapping_fn=lambda agent_id, *args, **kw: "shared")
         .rl_module(rl_module_spec=MultiRLModuleSpec(rl_module_specs={"shared": RLModuleSpec()}))
         .env_runners(num_env_runners=a.runners, num_envs_per_env_runner=1)
+        # Each iteration's figures: the mean over about one batch of episodes.
+        .callbacks(on_episode_end=parts_logger(window))
+        .reporting(metrics_num_episodes_for_smoothing=window)
         .training(train_batch_size_per_learner=a.batch, minibatch_size=512, num_epochs=4, lr=3e-4)
     )
     t0 = time.perf_counter()
@@ -95,11 +123,15 @@ def main():
             "agent_steps": er.get("num_agent_steps_sampled_lifetime", {}),
             "env_steps_lifetime": er.get("num_env_steps_sampled_lifetime"),
             "episode_return_mean": er.get("episode_return_mean"),
+            "parts_delivered_mean": er.get("parts_delivered"),
         }
         if isinstance(row["agent_steps"], dict):
             row["agent_steps"] = int(sum(row["agent_steps"].values()))
         rows.append(row)
         print(json.dumps(row), flush=True)
+        if a.minutes is not None and time.perf_counter() - t0 > 60 * a.minutes:
+            break
+    t_train = time.perf_counter() - t0
 
     module = algo.get_module("shared")
 
@@ -131,6 +163,7 @@ def main():
         "ray": ray.__version__,
         "torch": torch.__version__,
         "build_seconds": round(t_build, 1),
+        "wall_seconds": round(t_train, 1),  # build + training
         "iterations": rows,
         "eval": {k: {"parts_delivered": v[0], "contacts": v[1]} for k, v in ev.items()},
     }
@@ -139,12 +172,52 @@ def main():
             json.dump(out, fh, indent=1)
     if a.md:
         with open(a.md, "a") as fh:
-            fh.write(markdown(out))
+            png = a.png and os.path.relpath(a.png, os.path.dirname(os.path.abspath(a.md)))
+            fh.write(markdown(out, png))
+    if a.csv:
+        write_csv(a.csv, rows)
+    if a.png:
+        plot(a.png, out)
     algo.stop()
     ray.shutdown()
 
 
-def markdown(out):
+def write_csv(path, rows):
+    import csv
+
+    with open(path, "w", newline="") as fh:
+        w = csv.DictWriter(fh, fieldnames=list(rows[0]))
+        w.writeheader()
+        w.writerows(rows)
+
+
+def plot(path, out):
+    """Team return and parts delivered per training episode against env steps, with the
+    evaluated random and greedy parts as reference lines."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    rows = out["iterations"]
+    x = [r["env_steps_lifetime"] for r in rows]
+    fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(10, 3.6))
+    ax1.plot(x, [r["episode_return_mean"] for r in rows])
+    ax1.set(xlabel="env steps", ylabel="episode return (mean, team)", title="return")
+    ax2.plot(x, [r["parts_delivered_mean"] for r in rows], label="PPO (RLlib), training episodes")
+    for name, style in [("random", ":"), ("greedy", "--")]:
+        ax2.axhline(out["eval"][name]["parts_delivered"], ls=style, c="grey", label=name)
+    ax2.set(xlabel="env steps", ylabel="parts delivered per episode", title="parts delivered")
+    ax2.legend(fontsize=8)
+    fig.suptitle(f"RLlib PPO, shared policy, {out['setup']}", fontsize=10)
+    fig.tight_layout()
+    fig.savefig(path, dpi=90)
+
+
+def markdown(out, png=None, rows_shown=12):
+    """The figures as a markdown section: about `rows_shown` iterations of the table (every
+    iteration is in the --csv/--json files), the plot if written, the evaluation."""
+    rows = out["iterations"]
     lines = [
         "",
         "## RLlib example (`bench/python/rllib_example.py`)",
@@ -153,15 +226,24 @@ def markdown(out):
         f"shared by all robots, on {out['setup']} with the padded flat observation; "
         f"{out['runners']} env runners (Ray actors) sampling `tending.parallel_env` through "
         f"RLlib's `ParallelPettingZooEnv`; {out['batch']} env steps per batch, 4 epochs, "
-        f"minibatch 512. Algorithm build: {out['build_seconds']} s.",
+        f"minibatch 512, lr 3e-4. {len(rows)} iterations, "
+        f"{int(rows[-1]['env_steps_lifetime']):,} env steps, {out.get('wall_seconds', 'n/a')} s "
+        f"wall time (algorithm build: {out['build_seconds']} s).",
         "",
-        "| iteration | seconds | agent-steps sampled (lifetime) | env steps (lifetime) | episode return (mean, team) |",
-        "|---|---|---|---|---|",
+        "| iteration | seconds | agent-steps sampled (lifetime) | env steps (lifetime) "
+        "| episode return (mean, team) | parts delivered (mean, training episodes) |",
+        "|---|---|---|---|---|---|",
     ]
-    for r in out["iterations"]:
-        ret = r["episode_return_mean"]
-        ret = "n/a" if ret is None else f"{ret:.1f}"
-        lines.append(f"| {r['iter']} | {r['seconds']} | {r['agent_steps']} | {r['env_steps_lifetime']} | {ret} |")
+    step = max(1, len(rows) // rows_shown)
+    fmt = lambda v: "n/a" if v is None else f"{v:.1f}"  # noqa: E731
+    for r in rows:
+        if r["iter"] == 1 or r["iter"] % step == 0 or r is rows[-1]:
+            lines.append(
+                f"| {r['iter']} | {r['seconds']} | {r['agent_steps']} | {int(r['env_steps_lifetime'])} "
+                f"| {fmt(r['episode_return_mean'])} | {fmt(r.get('parts_delivered_mean'))} |"
+            )
+    if png:
+        lines += ["", f"![RLlib PPO learning curve]({png})"]
     lines += [
         "",
         "Evaluation after training (argmax actions, 200-step episodes, mean over "
@@ -174,7 +256,6 @@ def markdown(out):
         lines.append(f"| {k} | {v['parts_delivered']:.1f} | {v['contacts']:.1f} |")
     lines.append("")
     return "\n".join(lines)
-
 
 if __name__ == "__main__":
     main()
