@@ -96,7 +96,7 @@ unset ROS_LOCALHOST_ONLY ROS_AUTOMATIC_DISCOVERY_RANGE ROS_STATIC_PEERS FASTRTPS
 # refuses a nested package that is not a member. Built in the dev profile without
 # debuginfo: these are logic regression tests (they pass in 2 s either way), and an
 # unoptimised build of rustdds and its ~120 dependencies takes 1.5 min here against 3-4 min
-# optimised. JOBS: cargo build jobs.
+# optimised. Argument: how many cargo build jobs.
 rustdds_tests() {
     local rdds
     rdds="$(mktemp -d)"
