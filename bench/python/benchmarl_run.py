@@ -56,7 +56,8 @@ def main(argv=None):
                    help="actor and critic model: BenchMARL's MLP (MAPPO as the paper's "
                         "baseline) or the paper's attention encoder "
                         "(tending.benchmarl_smappo: MAPPO with it is SMAPPO)")
-    p.add_argument("--n-envs", type=int, default=32, help="envs stepped together in Rust")
+    p.add_argument("--n-envs", type=int, default=None,
+                   help="envs stepped together in Rust (default 32; 4 with --hparams mappo)")
     p.add_argument("--frames-per-batch", type=int, default=None,
                    help="frames per iteration (default: one 200-step episode of every env)")
     p.add_argument("--minibatch-iters", type=int, default=None,
@@ -70,8 +71,16 @@ def main(argv=None):
     p.add_argument("--threads", type=int, default=1,
                    help="torch threads (1 on a 2-core machine: torch's OpenMP threads spin "
                         "and starve the simulator's rayon threads)")
+    p.add_argument("--hparams", choices=("benchmarl", "mappo"), default="benchmarl",
+                   help="PPO settings: BenchMARL's defaults (45 epochs of 400-frame "
+                        "minibatches per batch, lr 5e-5, no entropy bonus) or MAPPO's, as "
+                        "`tending train` uses them (4 envs, one 800-frame minibatch, 10 "
+                        "epochs, lr 5e-4, entropy 0.01, GAE lambda 0.95, grad clip 10): "
+                        "9x fewer frame-gradients per frame, see python/README.md")
     p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
                    help="any ExperimentConfig field, e.g. --set gamma=0.95")
+    p.add_argument("--algo-set", action="append", default=[], metavar="KEY=VALUE",
+                   help="any field of the algorithm's config, e.g. --algo-set entropy_coef=0.01")
     p.add_argument("--out", type=Path, default=None)
     p.add_argument("--checkpoint-every", type=int, default=0, metavar="ITERS",
                    help="save BenchMARL's checkpoint (models, optimisers, collector state) "
@@ -99,10 +108,25 @@ def main(argv=None):
     out = args.out or ROOT / "target" / "benchmarl" / f"{name}_{setup}_seed{args.seed}"
     out.mkdir(parents=True, exist_ok=True)
     episode_steps = TendingEnv(setup, num_envs=1).episode_steps
+    if args.n_envs is None:
+        args.n_envs = 4 if args.hparams == "mappo" else 32
     fpb = args.frames_per_batch or args.n_envs * episode_steps
 
     algo = algorithm_config(args.algorithm)
     cfg = ExperimentConfig.get_from_yaml()
+    if args.hparams == "mappo":
+        # MAPPO's PPO (Yu et al. 2022's defaults as `tending train` sets them: policy/src/
+        # train/config.rs): the whole batch as one minibatch, 10 epochs, lr 5e-4, entropy
+        # 0.01, GAE lambda 0.95, gradient norm clipped at 10.
+        cfg.on_policy_minibatch_size = fpb
+        cfg.on_policy_n_minibatch_iters = 10
+        cfg.lr = 5e-4
+        cfg.clip_grad_val = 10.0
+        cfg.adam_eps = 1e-5
+        if hasattr(algo, "entropy_coef"):
+            algo.entropy_coef = 0.01
+        if hasattr(algo, "lmbda"):
+            algo.lmbda = 0.95
     cfg.sampling_device = cfg.train_device = cfg.buffer_device = "cpu"
     cfg.max_n_frames = args.frames
     cfg.on_policy_collected_frames_per_batch = cfg.off_policy_collected_frames_per_batch = fpb
@@ -137,6 +161,11 @@ def main(argv=None):
         if not hasattr(cfg, key):
             raise SystemExit(f"--set: ExperimentConfig has no field {key!r}")
         setattr(cfg, key, parse_value(value))
+    for item in args.algo_set:
+        key, _, value = item.partition("=")
+        if not hasattr(algo, key):
+            raise SystemExit(f"--algo-set: {type(algo).__name__} has no field {key!r}")
+        setattr(algo, key, parse_value(value))
 
     log = CsvLog(out, append_from=resume_frames if args.resume else None)
     if not args.no_greedy and not args.resume:

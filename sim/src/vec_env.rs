@@ -160,9 +160,17 @@ impl VecEnv {
                 for (c, ev) in con.iter_mut().zip(env.events()) {
                     *c = ev.collisions;
                 }
-                *done = env.is_done();
-                *fin = None;
-                if *done {
+                // `done` and `finished` are packed, one cache line for many envs shared by
+                // both threads' pieces: written only when they change, not every step
+                // (which moves the line between the cores; 1-3 % at 14.10_4 x 32).
+                let d = env.is_done();
+                if *done != d {
+                    *done = d;
+                }
+                if fin.is_some() {
+                    *fin = None;
+                }
+                if d {
                     *fin = Some(*env.metrics());
                     *ep += 1;
                     env.reset(episode_seed(base, l.first + i, *ep))?;
