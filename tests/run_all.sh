@@ -149,8 +149,19 @@ if cargo nextest --version >/dev/null 2>&1; then
     rdds_pid=$!
     trap 'kill "$venv_pid" "$py_pid" "$rdds_pid" 2>/dev/null || true' EXIT
     section "cargo nextest run --workspace --release (python ROS tests and the rustdds build beside it)"
+    nextest_ok=0
     cargo nextest run --workspace --release --locked --build-jobs 2 --no-fail-fast \
-        -E 'not binary(faults_kill)' 2>&1
+        -E 'not binary(faults_kill)' 2>&1 || nextest_ok=$?
+    if [ "$nextest_ok" != 0 ]; then
+        # Show what ran beside it before stopping (the EXIT trap would kill it unseen).
+        section "python ROS tests and rustdds build beside the failed nextest run"
+        wait "$py_pid" || true
+        cat "$py_log"
+        wait "$rdds_pid" || true
+        tail -n 20 "$rdds_log"
+        echo "cargo nextest run failed (exit $nextest_ok)"
+        exit 1
+    fi
     section "cargo test --doc --workspace --release (nextest does not run doctests)"
     cargo test --workspace --release --locked -j 2 --doc 2>&1
     section "python ROS tests (tests/interop, tests/bags), run beside nextest"
