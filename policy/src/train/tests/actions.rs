@@ -104,8 +104,7 @@ fn diagonal_actions_train_and_evaluate() {
     t.save_policy(&p).unwrap();
     let pol = crate::Policy::load(&p).unwrap();
     assert_eq!(pol.actor().arch.n_actions, 9);
-    let mut sc = ScenarioConfig::default();
-    sc.world.episode_steps = 40;
+    let sc = short_episodes();
     for ctrl in [
         Method::learned(Box::new(pol.actor().clone()), true),
         Method::shielded(Box::new(pol.actor().clone()), true),

@@ -49,11 +49,7 @@ fn resume_is_bit_exact() {
         assert_eq!(c.update, 2);
         assert_eq!(c.episodes, 4);
         let s3 = c.step().unwrap();
-        assert_eq!(c.actor.params.data, a.actor.params.data, "{kind} actor");
-        assert_eq!(c.critic.params.data, a.critic.params.data, "{kind} critic");
-        assert_eq!(c.actor.opt.m, a.actor.opt.m);
-        assert_eq!(c.critic.opt.v, a.critic.opt.v);
-        assert_eq!(c.vnorm, a.vnorm);
+        assert_same_learner(&c, &a, kind);
         assert_eq!(s3.team_reward, stats_a[2].team_reward);
         assert_eq!(s3.value_loss, stats_a[2].value_loss);
         assert!(!c.finished() && c.stage == 1 && c.stage_episodes == 2);
@@ -72,8 +68,7 @@ fn deterministic_for_a_seed() {
     let (sa, sb) = (a.step().unwrap(), b.step().unwrap());
     assert_eq!(a.actor.params.data, b.actor.params.data);
     assert_eq!(sa.team_reward, sb.team_reward);
-    let mut sc = ScenarioConfig::default();
-    sc.world.episode_steps = 40;
+    let sc = short_episodes();
     let mut c = Trainer::new(
         ModelKind::Smappo,
         a.cfg.clone(),

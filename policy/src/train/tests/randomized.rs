@@ -3,14 +3,7 @@
 use super::*;
 
 fn small_randomized(kind: ModelKind, range: &str, seed: u64) -> Trainer {
-    let mut sc = ScenarioConfig::default();
-    sc.world.episode_steps = 40;
-    let cfg = TrainConfig {
-        n_envs: 2,
-        ppo_epoch: 2,
-        num_mini_batch: 2,
-        ..TrainConfig::default()
-    };
+    let (cfg, sc) = (tiny(TrainConfig::default()), short_episodes());
     Trainer::new_randomized(kind, cfg, sc, range.parse().unwrap(), 8, seed).unwrap()
 }
 
@@ -122,8 +115,7 @@ fn randomized_refuses_bad_ranges() {
     // MAPPO: actor padded to the config's maxima, critic to the range's most robots
     let t = small_randomized(ModelKind::Mappo, "2..5.1..3_1..2", 0);
     let fixed = {
-        let mut sc = ScenarioConfig::default();
-        sc.world.episode_steps = 40;
+        let sc = short_episodes();
         Trainer::new(
             ModelKind::Mappo,
             t.cfg.clone(),
@@ -176,11 +168,7 @@ fn randomized_resume_is_bit_exact() {
         assert_eq!(c.update, 2);
         let s3 = c.step().unwrap();
         assert_eq!(s3.setup, stats_a[2].setup);
-        assert_eq!(c.actor.params.data, a.actor.params.data, "{kind} actor");
-        assert_eq!(c.critic.params.data, a.critic.params.data, "{kind} critic");
-        assert_eq!(c.actor.opt.m, a.actor.opt.m);
-        assert_eq!(c.critic.opt.v, a.critic.opt.v);
-        assert_eq!(c.vnorm, a.vnorm);
+        assert_same_learner(&c, &a, kind);
         assert_eq!(s3.team_reward, stats_a[2].team_reward);
         assert_eq!(s3.value_loss, stats_a[2].value_loss);
         assert_eq!(c.agent_steps, a.agent_steps);

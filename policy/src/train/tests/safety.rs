@@ -6,16 +6,12 @@ use super::*;
 /// and the masked distribution differs from the unshielded one on the same rollout seed.
 #[test]
 fn shielded_training_runs() {
-    let mut sc = ScenarioConfig::default();
-    sc.world.episode_steps = 40;
+    let sc = short_episodes();
     let mk = |shield| {
-        let cfg = TrainConfig {
-            n_envs: 2,
-            ppo_epoch: 2,
-            num_mini_batch: 2,
+        let cfg = tiny(TrainConfig {
             shield,
             ..TrainConfig::default()
-        };
+        });
         Trainer::new(
             ModelKind::Smappo,
             cfg,
