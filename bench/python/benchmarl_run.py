@@ -89,6 +89,12 @@ def main(argv=None):
                    help="continue from the newest checkpoint under OUT/benchmarl (a run "
                         "that outlives a session: commit OUT, then --resume elsewhere); "
                         "the CSVs are appended to")
+    p.add_argument("--eval-only", type=int, default=0, metavar="EPISODES",
+                   help="no training: restore OUT's newest checkpoint (same flags as the run) "
+                        "and evaluate its policy (argmax) and the greedy script on the same "
+                        "EPISODES layouts for each of --eval-seeds; writes OUT/eval.csv")
+    p.add_argument("--eval-seeds", default="0,1,2",
+                   help="with --eval-only: env seeds, comma-separated")
     p.add_argument("--no-greedy", action="store_true",
                    help="skip the greedy baseline's episodes (reference rows in episodes.csv)")
     args = p.parse_args(argv)
@@ -145,11 +151,11 @@ def main(argv=None):
     cfg.create_json = False
     cfg.checkpoint_interval = fpb * args.checkpoint_every
     cfg.checkpoint_at_end = args.checkpoint_every > 0
-    if args.resume:
+    if args.resume or args.eval_only:
         found = sorted((out / "benchmarl").glob("**/checkpoints/checkpoint_*.pt"),
                        key=lambda f: int(f.stem.split("_")[-1]))
         if not found:
-            raise SystemExit(f"--resume: no checkpoint under {out / 'benchmarl'} "
+            raise SystemExit(f"--resume/--eval-only: no checkpoint under {out / 'benchmarl'} "
                              "(runs save them with --checkpoint-every)")
         cfg.restore_file = str(found[-1])
         resume_frames = int(found[-1].stem.split("_")[-1])
@@ -166,6 +172,26 @@ def main(argv=None):
         if not hasattr(algo, key):
             raise SystemExit(f"--algo-set: {type(algo).__name__} has no field {key!r}")
         setattr(algo, key, parse_value(value))
+
+    if args.eval_only:
+        model = critic = None
+        if args.model == "smappo":
+            from tending.benchmarl_smappo import SmappoConfig
+
+            model = critic = SmappoConfig.for_setup(setup)
+        else:
+            model = MlpConfig.get_from_yaml()
+        import tempfile
+
+        # BenchMARL writes its config and logs where it saves: a scratch folder, so the
+        # committed run stays as it is.
+        cfg.save_folder = tempfile.mkdtemp(prefix="benchmarl-eval-")
+        cfg.loggers = []
+        experiment = Experiment(task=task, algorithm_config=algo, model_config=model,
+                                critic_model_config=critic, seed=args.seed, config=cfg)
+        evaluate(experiment.policy, setup, episode_steps, args.eval_only,
+                 [int(x) for x in args.eval_seeds.split(",")], resume_frames, out)
+        return
 
     log = CsvLog(out, append_from=resume_frames if args.resume else None)
     if not args.no_greedy and not args.resume:
@@ -194,6 +220,44 @@ def main(argv=None):
           f"(training wall time, across resumptions) "
           f"({experiment.total_frames / wall:.0f} frames/s overall, torch threads "
           f"{torch.get_num_threads()}); CSV in {out}")
+
+
+def evaluate(policy, setup, steps, episodes, seeds, frames, out):
+    """The restored policy (argmax) and the greedy script on the same layouts (one env per
+    episode, env seed 20,000 + s: none of training's or its evaluations' seeds)."""
+    from torchrl.envs.utils import ExplorationType, set_exploration_type
+
+    from tending.torchrl import TendingEnv
+
+    rows = []
+    for s in seeds:
+        for name in ("policy", "greedy"):
+            env = TendingEnv(setup, num_envs=episodes, seed=20_000 + s)
+            if name == "policy":
+                with set_exploration_type(ExplorationType.DETERMINISTIC), torch_no_grad():
+                    td = env.rollout(steps, policy=policy, break_when_any_done=False)
+            else:
+                td = env.rollout(steps, break_when_any_done=False, policy=lambda t, e=env:
+                                 t.set(("agents", "action"), e.greedy_actions()))
+            for e, r in enumerate(_rollout_rows(td.unbind(0))):
+                rows.append([name, frames, s, e, *r])
+    with open(out / "eval.csv", "w", newline="") as f:
+        w = csv.writer(f)
+        w.writerow(["method", "frames", "seed", "episode", "parts_delivered", "collisions",
+                    "mu", "team_reward"])
+        w.writerows(rows)
+    print(f"{setup}, checkpoint at {frames} frames, {episodes} episodes x seeds {seeds}:")
+    for name in ("policy", "greedy"):
+        mine = [r for r in rows if r[0] == name]
+        mean = [sum(r[k] for r in mine) / len(mine) for k in (4, 5, 6)]
+        print(f"  {name:7s} parts {mean[0]:6.2f}  contact steps {mean[1]:7.1f}  MU {mean[2]:.3f}")
+    print(f"wrote {out / 'eval.csv'}")
+
+
+def torch_no_grad():
+    import torch
+
+    return torch.no_grad()
 
 
 class CsvLog(Callback):
