@@ -7,6 +7,12 @@
 //!
 //!   cargo run --release -p sim --example vec_scaling -- [SETUP] [N_ENVS] [SECONDS] [ROUNDS]
 //!
+//! With `VEC_SCALING_ONLY=loop` (or `=vec`) only the N-env loop on this thread (or
+//! `VecEnv`) is measured, SECONDS once, and its agent-steps/s printed: two `loop`
+//! processes at once show what two independent single-threaded workers get on this
+//! machine, the ceiling for any split of one batch over its two cores
+//! (`bench/sim/ceiling.sh`).
+//!
 //! With ROUNDS > 1 (a shared, noisy machine) one env, the loop and VecEnv are measured in
 //! turn, SECONDS each, ROUNDS times, and each ratio is reported as the median over the
 //! rounds of that round's ratio (neighbours' load drifts over seconds, so a ratio of two
@@ -65,16 +71,30 @@ fn main() {
     let mut out = ObsBatch::default();
     let (mut envs, mut outs) = (new_envs(), vec![ObsBatch::default(); n_envs]);
     let mut v = VecEnv::new(cfg.clone(), setup, n_envs, 1).expect("VecEnv");
+    let step_loop = |envs: &mut Vec<Env>, outs: &mut Vec<ObsBatch>, i: usize| {
+        for (e, (env, o)) in envs.iter_mut().zip(outs.iter_mut()).enumerate() {
+            step_one(env, &pn[i % 64][e * r..(e + 1) * r], o, i);
+        }
+    };
+    match std::env::var("VEC_SCALING_ONLY").as_deref() {
+        Ok("loop") => {
+            let rate = rate(secs, |i| step_loop(&mut envs, &mut outs, i)) * (r * n_envs) as f64;
+            println!("{setup} x {n_envs} envs, loop on one thread: {rate:.0} agent-steps/s");
+            return;
+        }
+        Ok("vec") => {
+            let rate = rate(secs, |i| {
+                v.step_actions_observe(&pn[i % 64], &mut out).expect("step");
+            }) * (r * n_envs) as f64;
+            println!("{setup} x {n_envs} envs, VecEnv: {rate:.0} agent-steps/s");
+            return;
+        }
+        _ => {}
+    }
     let (mut singles, mut loops, mut forks) = (vec![], vec![], vec![]);
     for _ in 0..rounds.max(1) {
         singles.push(rate(secs, |i| step_one(&mut one, &p1[i % 64], &mut out, i)) * r as f64);
-        loops.push(
-            rate(secs, |i| {
-                for (e, (env, o)) in envs.iter_mut().zip(outs.iter_mut()).enumerate() {
-                    step_one(env, &pn[i % 64][e * r..(e + 1) * r], o, i);
-                }
-            }) * (r * n_envs) as f64,
-        );
+        loops.push(rate(secs, |i| step_loop(&mut envs, &mut outs, i)) * (r * n_envs) as f64);
         forks.push(
             rate(secs, |i| {
                 v.step_actions_observe(&pn[i % 64], &mut out).expect("step");
