@@ -82,10 +82,21 @@ sys.exit(0 if want <= got else 1)
 PY
 }
 
-evaluate() { # checkpoint setups out (skipped when out has them all, newer than checkpoint)
-    [ "$3/results.csv" -nt "$1" ] && has_eval "$3/results.csv" "$2" && return
+evaluate() { # checkpoint setups out (skipped when out has them all, of this very checkpoint)
+    # The checkpoint's hash is kept beside the results (checkpoint.sha256, committed): file
+    # times cannot say which is newer on a fresh clone, where git sets them all at checkout.
+    local sum; sum=$(sha256sum "$1" | cut -c1-64)
+    if has_eval "$3/results.csv" "$2"; then
+        [ "$(cat "$3/checkpoint.sha256" 2>/dev/null)" = "$sum" ] && return
+        # evaluated before the hash was recorded: trust the file times once
+        if [ ! -f "$3/checkpoint.sha256" ] && [ "$3/results.csv" -nt "$1" ]; then
+            echo "$sum" >"$3/checkpoint.sha256"
+            return
+        fi
+    fi
     echo "== eval $1 -> $3 ($2)"
     "$T" eval --checkpoint "$1" --setups "$2" --episodes "$EVAL_EPISODES" --seeds "$EVAL_SEEDS" --out "$3" >/dev/null
+    echo "$sum" >"$3/checkpoint.sha256"
 }
 
 greedy() { # name setups: the scripted baselines on the experiment's setups (not trained)
