@@ -504,8 +504,26 @@ impl World {
     /// until this is 0.
     pub fn entities_without_data(&self) -> usize {
         self.each_entity()
-            .filter(|(e, needs_flag)| e.pose.is_none() || (*needs_flag && e.flag.is_none()))
+            .filter(|(e, needs_flag)| Self::without_data(e, *needs_flag))
             .count()
+    }
+
+    /// Discovered machines and storages without data yet: boxes the robot could not see
+    /// in its observation, nor its safety filter steer around.
+    pub fn fixtures_without_data(&self) -> usize {
+        let m = self
+            .machines
+            .values()
+            .filter(|e| Self::without_data(e, true));
+        let s = self
+            .storages
+            .values()
+            .filter(|e| Self::without_data(e, false));
+        m.count() + s.count()
+    }
+
+    fn without_data(e: &EntityState, needs_flag: bool) -> bool {
+        e.pose.is_none() || (needs_flag && e.flag.is_none())
     }
 
     /// Stamp of the latest own pose (lockstep: the simulator state this robot is at).

@@ -280,3 +280,27 @@ fn admit_rule() {
         Ok(Accepted::NewWriter)
     );
 }
+
+#[test]
+fn fixtures_without_data_are_counted_apart_from_peers() {
+    let mut w = World::new("robot_0", cfg());
+    w.touch(&Entity::Machine(0));
+    w.touch(&Entity::Storage(0));
+    w.touch(&Entity::Robot("robot_1".into()));
+    assert_eq!(
+        (w.entities_without_data(), w.fixtures_without_data()),
+        (3, 2)
+    );
+    // a machine needs its pose and its part_ready flag
+    w.on_pose(&machine(0, Leaf::Pose), &pose(1.0, 1.0), 0.0)
+        .unwrap();
+    assert_eq!(w.fixtures_without_data(), 2);
+    w.on_flag(&machine(0, Leaf::PartReady), true, 0.0).unwrap();
+    w.on_pose(&storage(0, Leaf::Pose), &pose(-1.0, 1.0), 0.0)
+        .unwrap();
+    // only the peer is missing now: robots may act once SETTLE_MAX has passed
+    assert_eq!(
+        (w.entities_without_data(), w.fixtures_without_data()),
+        (1, 0)
+    );
+}
