@@ -13,11 +13,17 @@ use std::time::{Duration, Instant};
 
 #[derive(Args, Debug)]
 pub struct BenchArgs {
-    /// Seconds of stepping per measurement.
-    #[arg(long, default_value_t = 2.0)]
+    /// Seconds per measurement.
+    #[arg(long, default_value_t = 1.0)]
     pub seconds: f64,
-    /// Markdown report to write.
-    #[arg(long, default_value = "docs/bench/sim.md")]
+    /// Rounds of (1 env, 32 envs) measured in turn per setup; ratios are medians of each
+    /// round's ratio (this shared VM's speed drifts by 1.5x within minutes, so a ratio of
+    /// two measurements taken far apart says little).
+    #[arg(long, default_value_t = 5)]
+    pub rounds: usize,
+    /// Generated Markdown (its own file: the analysis in docs/bench/sim.md is written by
+    /// hand and links here).
+    #[arg(long, default_value = "docs/bench/sim_throughput.md")]
     pub out: PathBuf,
 }
 
@@ -76,25 +82,51 @@ fn measure_split(setup: Setup, secs: f64) -> Result<(f64, f64)> {
     ))
 }
 
+fn median(mut x: Vec<f64>) -> f64 {
+    x.sort_by(f64::total_cmp);
+    x[x.len() / 2]
+}
+
 pub fn run(a: BenchArgs) -> Result<()> {
     // batched steps run on sim::fork's threads (the caller and micropool's), not rayon's
     let threads = sim::fork::threads();
     let mut md = String::new();
     md += "# Simulator throughput (`tending bench-sim`)\n\n";
     md += &format!(
-        "Machine: {} threads for batched steps (sim::fork), {} cores. Batched: `VecEnv::step_actions_observe`. Random actions; every step includes all robots' observations and rewards. {:.1} s per cell.\n\n",
+        "Machine: {} threads for batched steps (sim::fork), {} cores. Batched: `VecEnv::step_actions_observe`. Random actions; every step includes all robots' observations and rewards. {:.1} s per measurement.\n\n",
         threads,
         std::thread::available_parallelism().map(|n| n.get()).unwrap_or(0),
         a.seconds
     );
-    md += "| setup | envs | agent-steps/s |\n|---|---|---|\n";
+    md += &format!(
+        "{} rounds per setup, each measuring 1 env then 32 envs; medians over rounds, and the median of the rounds' ratios.\n\n",
+        a.rounds.max(1)
+    );
+    md += "| setup | 1 env (agent-steps/s) | 32 envs (agent-steps/s) | 32 / 1 per round | 32 / 1 (median) |\n|---|---|---|---|---|\n";
     for setup in ["6.4_2", "14.10_4", "100.16_2"] {
-        for n_envs in [1usize, 32] {
-            let s: Setup = setup.parse()?;
-            let r = measure_vec(s, n_envs, a.seconds)?;
-            eprintln!("{setup:>9} x {n_envs:>2} envs: {:>12.0} agent-steps/s", r);
-            md += &format!("| {setup} | {n_envs} | {:.0} |\n", r);
+        let s: Setup = setup.parse()?;
+        let (mut one, mut many, mut ratio) = (vec![], vec![], vec![]);
+        for _ in 0..a.rounds.max(1) {
+            let (r1, r32) = (
+                measure_vec(s, 1, a.seconds)?,
+                measure_vec(s, 32, a.seconds)?,
+            );
+            eprintln!(
+                "{setup:>9}: 1 env {r1:>12.0} | 32 envs {r32:>12.0} agent-steps/s | {:.2}x",
+                r32 / r1
+            );
+            one.push(r1);
+            many.push(r32);
+            ratio.push(r32 / r1);
         }
+        let rounds: Vec<String> = ratio.iter().map(|r| format!("{r:.2}")).collect();
+        md += &format!(
+            "| {setup} | {:.0} | {:.0} | {} | **{:.2}x** |\n",
+            median(one),
+            median(many),
+            rounds.join(" "),
+            median(ratio)
+        );
     }
     md += "\n## Cost per agent-step as N grows (one env, 16 machines, 2 storages, one thread)\n\n";
     md += "Physics and rewards use a uniform-grid broad phase; the observation is all-to-all by the paper's design (every robot sees every other robot), so its cost per agent grows with N.\n\n";
