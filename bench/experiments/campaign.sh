@@ -8,7 +8,8 @@
 #   bench/experiments/campaign.sh report     # tables, plots, verdicts of what has finished
 #
 # Order: cheapest verdicts first (C and D train at 6.4_2; B adds three 100-episode stages;
-# A's large setups and 100.16_2 last). Runs land in results/paper/<experiment>/...; their
+# A's large setups and 100.16_2 last), then U: 100.16_2 at 100 updates, the paper's 100
+# episodes as MAPPO's reference code counts them (run.sh). Runs land in results/paper/<experiment>/...; their
 # small files (policy, log.csv, eval results, the train TOML) are committed, and so is
 # the trainer state of a run in flight, so a later session on a fresh machine continues
 # where this one stopped: each run is skipped when done (.done) and resumed
@@ -27,7 +28,7 @@ cargo build --release --bin tending
 mkdir -p runs/campaign-bin results/paper
 cp target/release/tending runs/campaign-bin/tending
 export TENDING=runs/campaign-bin/tending
-for e in ${EXPERIMENTS:-C D B A}; do
+for e in ${EXPERIMENTS:-C D B A U}; do
     echo "=== experiment $e at $(date -u +%FT%TZ)"
     bench/experiments/run.sh "$e"
 done

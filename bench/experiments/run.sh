@@ -20,6 +20,8 @@
 #   D  curriculum with a short (200 x SCALE) initial training
 #   R  beyond the paper: randomized counts per update (RANGE, default 2..12.2..8_1..4) for
 #      C's budget, evaluated zero-shot on C's setups
+#   U  100.16_2 at 100 updates (800 x SCALE simulated episodes): the paper's 100 episodes
+#      as MAPPO's reference code counts them
 #
 # Every experiment also evaluates the scripted greedy baseline on its setups (same episodes
 # and eval seed, $RUNS/<name>/greedy/eval, skipped when already there), puts the paper's
@@ -249,10 +251,10 @@ report_curriculum() { # name title
 report_all() {
     shopt -s nullglob
     local e
-    for e in A B C D; do
+    for e in A B C D U; do
         [ -n "$(echo $RUNS/$e/*/seed*/eval/results.csv $RUNS/$e/*/*/seed*/eval/results.csv)" ] || continue
         case "$e" in
-            A) report_a ;; C) report_zero_shot C "${C_TITLES[@]}" ;;
+            A) report_a ;; C) report_zero_shot C "${C_TITLES[@]}" ;; U) report_u ;;
             B) report_curriculum B "B: curriculum" ;;
             D) report_curriculum D "D: curriculum, short initial training" ;;
         esac
@@ -270,8 +272,32 @@ exp_r() {
         "R: training on randomized counts" --randomize "$range"
 }
 
+# The paper's 100 episodes of 100.16_2 read as MAPPO's reference code counts them: one
+# "episode" of marlbenchmark/on-policy's training loop is one update over
+# n_rollout_threads envs. Here: 100 updates of our 8 envs (800 simulated episodes), against
+# A's 13. Its own table (U.md), never mixed with A's budget (docs/RESULTS.md, "What an
+# episode is").
+exp_u() {
+    local s=100.16_2 e; e=$(eps 800)
+    local cfg; cfg=$(train_cfg U_100.16_2 100 16 2)
+    for seed in $SEEDS; do
+        for m in smappo mappo; do
+            local out="$RUNS/U/$s/$m/seed$seed"
+            train "$out" "$m" "$seed" "$cfg" --setup "$s" --episodes "$e"
+            evaluate "$out/policy.safetensors" "$s" "$out/eval"
+        done
+    done
+    greedy U "$s"
+    report_u
+}
+report_u() {
+    table U "U: 100.16_2 at 100 updates (800 simulated episodes)" \
+        $RUNS/U/*/*/seed*/eval/results.csv $RUNS/U/greedy/eval/results.csv -- $RUNS/U/*/*/seed*/log.csv
+    curves U "U: 100.16_2 at 100 updates, training" --metrics reward,mu $RUNS/U/*/*/seed*/log.csv
+}
+
 case "${1:-}" in
-    A) exp_a ;; B) exp_b ;; R) exp_r ;; C) exp_c ;; D) exp_d ;;
+    A) exp_a ;; B) exp_b ;; R) exp_r ;; C) exp_c ;; D) exp_d ;; U) exp_u ;;
     all) exp_a; exp_b; exp_c; exp_d; exp_r ;;
     report) report_all ;;
     *) sed -n '2,26p' "$0"; exit 2 ;;

@@ -229,7 +229,9 @@ def main():
 
 
 def tables(exp):
-    return {"A": "Table I", "B": "Table II", "C": "Table III", "D": "Table IV"}.get(exp, "")
+    return {"A": "Table I", "B": "Table II", "C": "Table III", "D": "Table IV", "U": "Table I"}.get(
+        exp, ""
+    )
 
 
 if __name__ == "__main__":
