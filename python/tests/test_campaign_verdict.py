@@ -1,0 +1,73 @@
+"""The paper campaign's verdict script (bench/experiments/verdict.py) on synthetic runs:
+experiment U (100.16_2 at 100 updates) is read by Table I's protocol (the last 100
+training episodes of each finished run's log.csv) and judged against the paper's +53 %."""
+import csv
+import pathlib
+import shutil
+import subprocess
+import sys
+
+ROOT = pathlib.Path(__file__).resolve().parents[2]
+LOG_FIELDS = ["update", "episodes", "setup", "parts_delivered", "collisions", "mu", "wall_secs"]
+# the columns `tending eval` writes
+EVAL_FIELDS = ["policy", "setup", "seed", "episodes", "parts_delivered", "collisions",
+               "collisions_robot_robot", "collisions_robot_machine", "collisions_robot_storage",
+               "collisions_robot_wall", "contacts_per_robot_step", "robot_robot_per_robot_step",
+               "mu", "team_reward"]
+
+
+def fake_run(runs, model, seed, parts, collisions, mu):
+    d = runs / "U" / "100.16_2" / model / f"seed{seed}"
+    (d / "eval").mkdir(parents=True)
+    (d / ".done").touch()
+    with open(d / "log.csv", "w", newline="") as f:
+        w = csv.DictWriter(f, fieldnames=LOG_FIELDS)
+        w.writeheader()
+        for u in range(1, 101):
+            # early updates deliver nothing: only the last 100 episodes may count
+            late = u * 8 > 800 - 100
+            w.writerow({"update": u, "episodes": u * 8, "setup": "100.16_2",
+                        "parts_delivered": parts if late else 0.0,
+                        "collisions": collisions, "mu": mu if late else 0.0,
+                        "wall_secs": 6.0 * u})
+    with open(d / "eval" / "results.csv", "w", newline="") as f:
+        w = csv.DictWriter(f, fieldnames=EVAL_FIELDS)
+        w.writeheader()
+        row = dict.fromkeys(EVAL_FIELDS, 0.0)
+        row.update({"policy": f"{model} (policy.safetensors)", "setup": "100.16_2", "seed": 0,
+                    "episodes": 50, "parts_delivered": parts, "collisions": collisions,
+                    "mu": mu})
+        w.writerow(row)
+
+
+def verdict_rows(runs):
+    out = subprocess.run(
+        [sys.executable, str(ROOT / "bench/experiments/verdict.py"), "--runs", str(runs),
+         "--paper", str(ROOT / "bench/experiments/paper_mu.csv")],
+        check=True, capture_output=True, text=True).stdout
+    return [r for r in out.splitlines() if "experiment U" in r]
+
+
+def test_u_is_pending_until_every_seed_finished(tmp_path):
+    fake_run(tmp_path, "smappo", 0, 30.0, 100.0, 0.9)
+    fake_run(tmp_path, "mappo", 0, 15.0, 200.0, 0.6)
+    rows = verdict_rows(tmp_path)
+    assert len(rows) == 2
+    assert all("**pending**" in r for r in rows), rows
+
+
+def test_u_is_judged_by_the_last_100_training_episodes(tmp_path):
+    for seed in range(3):
+        fake_run(tmp_path, "smappo", seed, 30.0, 100.0, 0.92)
+        fake_run(tmp_path, "mappo", seed, 15.0, 200.0, 0.60)
+    gain, table = verdict_rows(tmp_path)
+    assert "**reproduced**" in gain and "+100 %" in gain, gain
+    assert "**reproduced**" in table and "0.92" in table, table
+    # a SMAPPO that delivers less than MAPPO does not reproduce the claim
+    shutil.rmtree(tmp_path / "U")
+    for seed in range(3):
+        fake_run(tmp_path, "smappo", seed, 10.0, 100.0, 0.3)
+        fake_run(tmp_path, "mappo", seed, 15.0, 200.0, 0.6)
+    gain, table = verdict_rows(tmp_path)
+    assert "**not**" in gain, gain
+    assert "**reproduced**" not in table, table
