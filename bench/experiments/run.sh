@@ -158,22 +158,28 @@ curves() { # name title log.csv...
         || echo "!! plot curves for $name failed" >&2
 }
 
+retrain() { # name setup episodes: both models and every seed trained on setup, evaluated there
+    local name="$1" s="$2" e="$3" nr nm ns seed m
+    read -r nr nm ns <<<"$(counts "$s")"
+    local cfg; cfg=$(train_cfg "${name}_$s" "$nr" "$nm" "$ns")
+    for seed in $SEEDS; do
+        for m in smappo mappo; do
+            local out="$RUNS/$name/$s/$m/seed$seed"
+            train "$out" "$m" "$seed" "$cfg" --setup "$s" --episodes "$e"
+            evaluate "$out/policy.safetensors" "$s" "$out/eval"
+        done
+    done
+}
+
 exp_a() {
     # cheapest verdicts first: 100.16_2's 100 episodes cost about an hour for all six runs
     # and settle the "53 % more parts" claim; 14.10_4 holds Fig. 5; 12.8_4 one Table I row
     local setups="6.4_2 8.6_2 10.6_4 14.10_4 12.8_4"
     [ "${FULL_100:-0}" = 1 ] && setups="6.4_2 8.6_2 10.6_4 100.16_2 14.10_4 12.8_4"
+    local s e
     for s in $setups; do
-        local n e; read -r nr nm ns <<<"$(counts "$s")"
         e=$(eps 2000); [ "$s" = 100.16_2 ] && e=$(eps 100)
-        local cfg; cfg=$(train_cfg "A_$s" "$nr" "$nm" "$ns")
-        for seed in $SEEDS; do
-            for m in smappo mappo; do
-                local out="$RUNS/A/$s/$m/seed$seed"
-                train "$out" "$m" "$seed" "$cfg" --setup "$s" --episodes "$e"
-                evaluate "$out/policy.safetensors" "$s" "$out/eval"
-            done
-        done
+        retrain A "$s" "$e"
     done
     greedy A "${setups// /,}"
     report_a
@@ -278,16 +284,8 @@ exp_r() {
 # A's 13. Its own table (U.md), never mixed with A's budget (docs/RESULTS.md, "What an
 # episode is").
 exp_u() {
-    local s=100.16_2 e; e=$(eps 800)
-    local cfg; cfg=$(train_cfg U_100.16_2 100 16 2)
-    for seed in $SEEDS; do
-        for m in smappo mappo; do
-            local out="$RUNS/U/$s/$m/seed$seed"
-            train "$out" "$m" "$seed" "$cfg" --setup "$s" --episodes "$e"
-            evaluate "$out/policy.safetensors" "$s" "$out/eval"
-        done
-    done
-    greedy U "$s"
+    retrain U 100.16_2 "$(eps 800)"
+    greedy U 100.16_2
     report_u
 }
 report_u() {
