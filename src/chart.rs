@@ -51,6 +51,16 @@ pub fn category_label(names: &[String], v: f64) -> String {
     }
 }
 
+/// A tick label without plotters' default trailing ".0": 2000 for 2000.0, 0.25 for 0.25
+/// (at most 3 decimals, trailing zeros cut).
+pub fn number_label(v: f64) -> String {
+    if (v - v.round()).abs() < 1e-9 {
+        return format!("{:.0}", v.round() + 0.0); // + 0.0: no "-0"
+    }
+    let s = format!("{v:.3}");
+    s.trim_end_matches('0').trim_end_matches('.').to_string()
+}
+
 /// Register the bundled font with plotters (once per process; before drawing any text).
 pub fn init() {
     static ONCE: Once = Once::new();
@@ -74,6 +84,8 @@ pub fn mesh<'a, DB: DrawingBackend + 'a>(
         .light_line_style(TRANSPARENT)
         .bold_line_style(GRID)
         .x_labels(6)
+        .x_label_formatter(&|v| number_label(*v))
+        .y_label_formatter(&|v| number_label(*v))
         .x_desc(x)
         .y_desc(y)
         .axis_desc_style((FONT, LABEL))
@@ -93,6 +105,16 @@ pub fn legend<'a, DB: DrawingBackend + 'a>(c: &mut ChartContext<'a, DB, Xy>) -> 
 
 #[cfg(test)]
 mod tests {
+    #[test]
+    fn tick_labels_drop_trailing_zeros() {
+        use super::number_label;
+        assert_eq!(number_label(2000.0), "2000");
+        assert_eq!(number_label(-0.0), "0");
+        assert_eq!(number_label(0.25), "0.25");
+        assert_eq!(number_label(-150.5), "-150.5");
+        assert_eq!(number_label(0.1 + 0.2), "0.3");
+    }
+
     #[test]
     fn the_bundled_font_renders_text() {
         use plotters::prelude::*;

@@ -92,6 +92,11 @@ pub struct CurvesArgs {
     /// 0: about a twentieth of the run.
     #[arg(long, default_value_t = 0)]
     pub smooth: usize,
+    /// Fractions (e.g. 0.5,0.7) of the first model's final value (mean of its last 100
+    /// episodes) to draw as dashed levels, each marked where its curve first reaches it:
+    /// the paper's Fig. 5.
+    #[arg(long)]
+    pub levels: Option<String>,
 }
 
 pub fn run(a: PlotArgs) -> Result<()> {
@@ -377,6 +382,38 @@ mod tests {
         assert_eq!(draw::nice_range(0.0, 0.93, 5), (0.0, 1.0, 0.2));
     }
 
+    #[test]
+    fn levels_are_fractions_of_the_final_mean_reached_on_the_drawn_curve() {
+        // raw seed-mean: 0, 100, 200 ... at 8, 16, 24 ... episodes; final = mean of the
+        // points after (last - 100) episodes
+        let raw: Curve = (1..=20)
+            .map(|i| (i as f64 * 8.0, (i - 1) as f64 * 100.0, 0.0, 2))
+            .collect();
+        let fin = raw
+            .iter()
+            .filter(|p| p.0 > 160.0 - 100.0)
+            .map(|p| p.1)
+            .sum::<f64>()
+            / 13.0;
+        let smoothed: Curve = raw.iter().map(|p| (p.0, p.1 - 50.0, 0.0, 2)).collect();
+        let ls = levels(&raw, &smoothed, &[0.5, 0.7], 100.0).unwrap();
+        assert!((ls[0].value - 0.5 * fin).abs() < 1e-9, "{ls:?}");
+        // first smoothed point >= 0.5 * fin
+        let want = smoothed.iter().find(|p| p.1 >= 0.5 * fin).unwrap().0;
+        assert_eq!(ls[0].hit, Some(want));
+        assert!(ls[1].hit.unwrap() > want);
+        // a level above every point is never reached; a non-positive final has no levels
+        let flat: Curve = raw.iter().map(|p| (p.0, 10.0, 0.0, 1)).collect();
+        assert_eq!(levels(&raw, &flat, &[1.0], 100.0).unwrap()[0].hit, None);
+        let neg: Curve = raw.iter().map(|p| (p.0, -p.1, 0.0, 1)).collect();
+        assert!(levels(&neg, &neg, &[0.5], 100.0).is_none());
+        assert_eq!(parse_levels("0.5, 0.7").unwrap(), vec![0.5, 0.7]);
+        for bad in ["0", "1.5", "x"] {
+            let e = parse_levels(bad).unwrap_err().to_string();
+            assert!(e.contains("--levels") && e.contains(bad), "{e}");
+        }
+    }
+
     fn is_png(path: &Path) -> bool {
         let b = std::fs::read(path).unwrap_or_default();
         b.len() > 1000 && &b[1..4] == b"PNG"
@@ -425,6 +462,7 @@ mod tests {
             schedule: None,
             metrics: "reward,parts,mu".into(),
             smooth: 0,
+            levels: None,
         })
         .unwrap();
         assert!(is_png(&out));
@@ -443,6 +481,7 @@ mod tests {
             schedule: None,
             metrics: "reward,mu".into(),
             smooth: 1,
+            levels: Some("0.5,0.7".into()),
         })
         .unwrap();
         assert!(is_png(&out));

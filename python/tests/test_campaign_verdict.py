@@ -71,3 +71,43 @@ def test_u_is_judged_by_the_last_100_training_episodes(tmp_path):
     gain, table = verdict_rows(tmp_path)
     assert "**not**" in gain, gain
     assert "**reproduced**" not in table, table
+
+
+def fig5_run(runs, seed, reward_at):
+    """A finished 14.10_4 SMAPPO run of experiment A: 250 updates of 8 episodes, team reward
+    reward_at(update)."""
+    d = runs / "A" / "14.10_4" / "smappo" / f"seed{seed}"
+    d.mkdir(parents=True)
+    (d / ".done").touch()
+    with open(d / "log.csv", "w", newline="") as f:
+        w = csv.DictWriter(f, fieldnames=LOG_FIELDS + ["team_reward"])
+        w.writeheader()
+        for u in range(1, 251):
+            w.writerow({"update": u, "episodes": u * 8, "setup": "14.10_4",
+                        "parts_delivered": 1.0, "collisions": 1.0, "mu": 0.5,
+                        "wall_secs": 1.0 * u, "team_reward": reward_at(u)})
+
+
+def fig5_row(runs):
+    out = subprocess.run(
+        [sys.executable, str(ROOT / "bench/experiments/verdict.py"), "--runs", str(runs),
+         "--paper", str(ROOT / "bench/experiments/paper_mu.csv")],
+        check=True, capture_output=True, text=True).stdout
+    return next(r for r in out.splitlines() if r.startswith("| Fig. 5"))
+
+
+def test_fig5_counts_episodes_and_says_the_same_in_updates(tmp_path):
+    # reward climbs 0 -> 500 by update 100 and stays: 50 % (250) is first reached at
+    # update 50 (episode 400), 70 % (350) at update 70 (episode 560), on the 5-update
+    # smoothed curve two updates later
+    for seed in range(3):
+        fig5_run(tmp_path, seed, lambda u: 500.0 * min(u, 100) / 100)
+    row = fig5_row(tmp_path)
+    assert "**not**" in row, row  # 416 simulated episodes > 100
+    assert "50 % at 416 episodes, 70 % at 576" in row, row
+    assert "50 % at update 52, 70 % at 72, which would meet 100 / 200" in row, row
+    # a curve that gets there within 100 / 200 simulated episodes is reproduced
+    shutil.rmtree(tmp_path / "A")
+    for seed in range(3):
+        fig5_run(tmp_path, seed, lambda u: 500.0 * min(u, 5) / 5)
+    assert "**reproduced**" in fig5_row(tmp_path)

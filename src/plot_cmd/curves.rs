@@ -49,6 +49,10 @@ impl Metric {
     }
 }
 
+/// The final value `--levels` takes fractions of: the mean of the last this many episodes
+/// (the window of the paper's Table I protocol).
+pub(super) const FINAL_WINDOW: f64 = 100.0;
+
 /// One training run's log.
 #[derive(Debug, Clone)]
 pub(super) struct LogRun {
@@ -196,6 +200,62 @@ pub(super) struct CurveGroup {
     /// model -> (runs, per metric curve)
     pub(super) models: Vec<(String, usize, Vec<Curve>)>,
     pub(super) x_max: f64,
+    /// Per metric, the `--levels` marks of the group's first model (empty without them).
+    pub(super) levels: Vec<Vec<Level>>,
+}
+
+/// A fraction of a model's final value and where its curve first reaches it: the paper's
+/// Fig. 5 draws 50 % and 70 % of SMAPPO's "final convergence value" this way.
+#[derive(Debug, Clone, PartialEq)]
+pub(super) struct Level {
+    pub(super) frac: f64,
+    /// frac x the final value.
+    pub(super) value: f64,
+    /// The first episode count at which the drawn (smoothed) mean reaches `value`.
+    pub(super) hit: Option<f64>,
+}
+
+/// `--levels` of one model's metric: the final value is the mean of the unsmoothed
+/// seed-mean over the last `window` episodes (as bench/experiments/verdict.py judges Fig. 5),
+/// the hit is read on the smoothed curve that is drawn. None when the final value is not
+/// positive: a fraction of it says nothing about progress.
+pub(super) fn levels(
+    raw: &Curve,
+    smoothed: &Curve,
+    fracs: &[f64],
+    window: f64,
+) -> Option<Vec<Level>> {
+    let last = raw.last()?.0;
+    let tail: Vec<f64> = raw
+        .iter()
+        .filter(|p| p.0 > last - window)
+        .map(|p| p.1)
+        .collect();
+    let fin = tail.iter().sum::<f64>() / tail.len() as f64;
+    if fin <= 0.0 {
+        return None;
+    }
+    Some(
+        fracs
+            .iter()
+            .map(|&frac| {
+                let value = frac * fin;
+                let hit = smoothed.iter().find(|p| p.1 >= value).map(|p| p.0);
+                Level { frac, value, hit }
+            })
+            .collect(),
+    )
+}
+
+/// `--levels`: fractions in (0, 1], comma-separated.
+pub(super) fn parse_levels(s: &str) -> Result<Vec<f64>> {
+    s.split(',')
+        .filter(|p| !p.trim().is_empty())
+        .map(|p| match p.trim().parse::<f64>() {
+            Ok(f) if f > 0.0 && f <= 1.0 => Ok(f),
+            _ => bail!("--levels: `{p}` is not a fraction in (0, 1]"),
+        })
+        .collect()
 }
 
 pub(super) fn build_groups(
@@ -203,6 +263,7 @@ pub(super) fn build_groups(
     metrics: &[Metric],
     schedule: &Option<Vec<(f64, String)>>,
     smooth: usize,
+    fracs: &[f64],
 ) -> Vec<CurveGroup> {
     let names: BTreeSet<Option<String>> = runs.iter().map(|r| r.group.clone()).collect();
     let mut names: Vec<Option<String>> = names.into_iter().collect();
@@ -235,6 +296,32 @@ pub(super) fn build_groups(
                 .iter()
                 .filter_map(|r| r.episodes.last().copied())
                 .fold(1.0, f64::max);
+            // --levels: of the first model (SMAPPO when it is there), unsmoothed for its
+            // final value
+            let levels = match (models.first(), fracs.is_empty()) {
+                (Some(lead), false) => {
+                    let mine: Vec<&&LogRun> = rs.iter().filter(|r| &r.model == lead).collect();
+                    metrics
+                        .iter()
+                        .map(|metric| {
+                            let series = |w: usize| -> Curve {
+                                let s: Vec<(Vec<f64>, Vec<f64>)> = mine
+                                    .iter()
+                                    .map(|r| {
+                                        let st = stage_ids(&r.episodes, &stage_marks(r));
+                                        let ys = &r.values[metric.index()];
+                                        (r.episodes.clone(), smooth_within_stages(ys, &st, w))
+                                    })
+                                    .collect();
+                                aggregate_curves(&s)
+                            };
+                            levels(&series(1), &series(smooth), fracs, FINAL_WINDOW)
+                                .unwrap_or_default()
+                        })
+                        .collect()
+                }
+                _ => vec![],
+            };
             let models = models
                 .into_iter()
                 .map(|m| {
@@ -262,6 +349,7 @@ pub(super) fn build_groups(
                 marks,
                 models,
                 x_max,
+                levels,
             }
         })
         .collect()
@@ -290,7 +378,28 @@ pub(super) fn run_curves(a: &CurvesArgs) -> Result<()> {
     } else {
         (longest / 20).max(1)
     };
-    let groups = build_groups(&runs, &metrics, &schedule, smooth);
+    let fracs = a
+        .levels
+        .as_deref()
+        .map(parse_levels)
+        .transpose()?
+        .unwrap_or_default();
+    let groups = build_groups(&runs, &metrics, &schedule, smooth, &fracs);
+    for g in &groups {
+        for (metric, ls) in metrics.iter().zip(&g.levels) {
+            for l in ls {
+                let at = l.hit.map_or("never".into(), |x| format!("at {x} episodes"));
+                eprintln!(
+                    "{}{}: {:.0} % of the final {} ({:.3}) reached {at}",
+                    g.name.as_deref().map_or(String::new(), |n| format!("{n} ")),
+                    g.models[0].0,
+                    l.frac * 100.0,
+                    metric.title(),
+                    l.value / l.frac,
+                );
+            }
+        }
+    }
     let how = if smooth > 1 {
         format!(", moving average of {smooth} updates")
     } else {

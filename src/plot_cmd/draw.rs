@@ -2,7 +2,7 @@
 //! font ([`crate::chart`], docs/adr/0010-plotting.md): every PNG has a title, axis labels and
 //! a legend.
 
-use std::collections::BTreeMap;
+use std::collections::{BTreeMap, BTreeSet};
 use std::path::Path;
 
 use anyhow::{anyhow, bail, Result};
@@ -12,7 +12,7 @@ use plotters::style::text_anchor::{HPos, Pos, VPos};
 
 use super::KNOWN_MODELS;
 use super::{model_color, model_label, model_rank, sort_setups, BarStat, CurveGroup, Metric};
-use crate::chart::{self, Xy};
+use crate::chart::{self, Xy, INK};
 
 const SOFT: RGBColor = RGBColor(100, 100, 100);
 
@@ -294,15 +294,12 @@ pub(super) fn draw_curves(
             (chart::FONT, chart::LABEL).into_font().color(&SOFT),
         )
         .map_err(err)?;
-    // The legend's run counts: the most over groups.
-    let mut runs: BTreeMap<&str, usize> = BTreeMap::new();
-    for g in groups {
-        for (m, n, _) in &g.models {
-            let e = runs.entry(m.as_str()).or_default();
-            *e = (*e).max(*n);
-        }
-    }
-    let mut all: Vec<String> = runs.keys().map(|m| m.to_string()).collect();
+    let mut all: Vec<String> = groups
+        .iter()
+        .flat_map(|g| g.models.iter().map(|(m, _, _)| m.clone()))
+        .collect::<BTreeSet<_>>()
+        .into_iter()
+        .collect();
     all.sort_by_key(|m| model_rank(m));
     let others: Vec<String> = all
         .iter()
@@ -311,21 +308,11 @@ pub(super) fn draw_curves(
         .collect();
     let cells = body.split_evenly((nrows, ncols));
     for (g, cell) in groups.iter().zip(cells.iter()) {
-        let fewer: Vec<String> = g
-            .models
-            .iter()
-            .filter(|(m, n, _)| runs.get(m.as_str()) != Some(n))
-            .map(|(m, n, _)| format!("{m} {n}"))
-            .collect();
+        // each panel's legend counts its own seeds (a campaign in flight has fewer in some)
         let cell = match &g.name {
-            Some(name) if fewer.is_empty() => cell
+            Some(name) => cell
                 .titled(&format!("setup {name}"), (chart::FONT, chart::CAPTION))
                 .map_err(err)?,
-            Some(name) => {
-                let head = format!("setup {name} (seeds: {})", fewer.join(", "));
-                cell.titled(&head, (chart::FONT, chart::CAPTION))
-                    .map_err(err)?
-            }
             None => cell.clone(),
         };
         let panels = cell.split_evenly((metrics.len(), 1));
@@ -335,7 +322,6 @@ pub(super) fn draw_curves(
                 pi,
                 metric: *metric,
                 last: pi + 1 == metrics.len(),
-                runs: &runs,
                 others: &others,
             };
             p.draw(area).map_err(err)?;
@@ -352,7 +338,6 @@ struct CurvePanel<'a> {
     metric: Metric,
     /// The bottom panel of its column carries the x description.
     last: bool,
-    runs: &'a BTreeMap<&'a str, usize>,
     others: &'a [String],
 }
 
@@ -394,7 +379,7 @@ impl CurvePanel<'_> {
         let x_desc = if self.last { "episodes" } else { "" };
         chart::mesh(&mut c, x_desc, self.metric.title())?;
         self.draw_stages(&mut c, ylo, yhi)?;
-        for (m, _, curves) in &self.g.models {
+        for (m, n, curves) in &self.g.models {
             let color = model_color(m, self.others);
             let cv = &curves[self.pi];
             if cv.iter().any(|p| p.3 > 1) && cv.len() > 1 {
@@ -402,7 +387,6 @@ impl CurvePanel<'_> {
                 band.extend(cv.iter().rev().map(|p| (p.0, p.1 - p.2)));
                 c.draw_series(std::iter::once(Polygon::new(band, color.mix(0.2).filled())))?;
             }
-            let n = self.runs.get(m.as_str()).copied().unwrap_or(0);
             let series = if cv.len() == 1 {
                 c.draw_series(std::iter::once(
                     EmptyElement::at((cv[0].0, cv[0].1)) + Circle::new((0, 0), 4, color.filled()),
@@ -414,11 +398,44 @@ impl CurvePanel<'_> {
                 ))?
             };
             if self.pi == 0 {
-                series.label(model_label(m, n)).legend(legend_line(color));
+                series.label(model_label(m, *n)).legend(legend_line(color));
             }
         }
+        self.draw_levels(&mut c)?;
         if self.pi == 0 {
             chart::legend(&mut c)?;
+        }
+        Ok(())
+    }
+
+    /// `--levels`: a dashed line at each fraction of the first model's final value, and a
+    /// dot with the episode count where its curve first reaches it (the paper's Fig. 5).
+    fn draw_levels(&self, c: &mut ChartContext<BitMapBackend, Xy>) -> Drawn {
+        let Some(levels) = self.g.levels.get(self.pi) else {
+            return Ok(());
+        };
+        let Some((lead, _, _)) = self.g.models.first() else {
+            return Ok(());
+        };
+        let color = model_color(lead, self.others);
+        let style = (chart::FONT, chart::TICK).into_font().color(&INK);
+        for l in levels {
+            c.draw_series(DashedLineSeries::new(
+                [(0.0, l.value), (self.g.x_max, l.value)],
+                8,
+                5,
+                color.mix(0.7).stroke_width(1),
+            ))?;
+            let text = match l.hit {
+                Some(x) => format!("{:.0} % of final: {x} episodes", l.frac * 100.0),
+                None => format!("{:.0} % of final: not reached", l.frac * 100.0),
+            };
+            let at = l.hit.unwrap_or(0.0);
+            c.draw_series(std::iter::once(
+                EmptyElement::at((at, l.value))
+                    + Circle::new((0, 0), 5, color.filled())
+                    + Text::new(text, (8, -18), style.clone()),
+            ))?;
         }
         Ok(())
     }
