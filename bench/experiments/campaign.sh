@@ -6,6 +6,7 @@
 #   bench/experiments/campaign.sh            # run (or resume) everything, in the background:
 #   nohup nice -n 10 bench/experiments/campaign.sh > results/paper/campaign.log 2>&1 &
 #   bench/experiments/campaign.sh report     # tables, plots, verdicts of what has finished
+#   bench/experiments/campaign.sh baselines  # any baseline added after an experiment finished
 #
 # Order: cheapest verdicts first (C and D train at 6.4_2; B adds three 100-episode stages;
 # A's large setups and 100.16_2 last), then U: 100.16_2 at 100 updates, the paper's 100
@@ -21,8 +22,8 @@ set -euo pipefail
 cd "$(dirname "$0")/../.."
 export SCALE=1 SEEDS="${SEEDS:-0 1 2}" EVAL_EPISODES=50 EVAL_SEEDS=0,1,2 RUNS=results/paper \
     EXTRA=1 FULL_100=1
-if [ "${1:-}" = report ]; then
-    exec bench/experiments/run.sh report
+if [ "${1:-}" = report ] || [ "${1:-}" = baselines ]; then
+    exec bench/experiments/run.sh "$1"
 fi
 cargo build --release --bin tending
 mkdir -p runs/campaign-bin results/paper

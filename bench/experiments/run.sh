@@ -1,7 +1,9 @@
 #!/usr/bin/env bash
 # The paper's four experiments (section V) with `tending train` / `tending eval`.
 #
-#   bench/experiments/run.sh A|B|C|D|R|all|report   (report: tables and verdicts only)
+#   bench/experiments/run.sh A|B|C|D|R|U|all|report|baselines
+#   (report: tables and verdicts only; baselines: the scripted and shipped baselines of every
+#   experiment in $RUNS, each skipped when already evaluated)
 #
 # Budget: SCALE (default 0.1) multiplies every episode count of the paper (2,000 initial
 # episodes, 100 per curriculum step, 100 for 100.16_2), the same for SMAPPO and MAPPO so the
@@ -121,6 +123,13 @@ greedy() { # name setups: the scripted baselines on the experiment's setups (not
     # the shipped target-menu policy (trained on 6.4_2 behind the ORCA filter, evaluated as
     # robot_node runs it): evaluation only, never trained here
     evaluate policy/pretrained/smappo_6.4_2.safetensors "$2" "$RUNS/$1/shipped/eval"
+    # uniform random moves: the floor a model must rise above (at 100.16_2 random walkers
+    # already keep MU near 0.56)
+    out="$RUNS/$1/random/eval"
+    if ! has_eval "$out/results.csv" "$2"; then
+        echo "== eval random -> $out ($2)"
+        "$T" eval --policy random --setups "$2" --episodes "$EVAL_EPISODES" --seeds "$EVAL_SEEDS" --out "$out" >/dev/null
+    fi
 }
 
 plot_bin() { # a tending that has `plot` (TENDING may be an older copy)
@@ -135,7 +144,7 @@ table() { # name title csv-glob... [-- training log.csv... for the paper's last-
     # (a campaign in flight has no greedy results yet: only existing files are read)
     while [ $# -gt 0 ] && [ "$1" != -- ]; do [ -f "$1" ] && files+=("$1"); shift; done
     [ $# -gt 0 ] && shift && logs=("$@")
-    for f in greedy-orca matching-orca shipped; do
+    for f in greedy-orca matching-orca shipped random; do
         [ -f "$RUNS/$name/$f/eval/results.csv" ] && extra+=("$RUNS/$name/$f/eval/results.csv")
     done
     python3 bench/experiments/table.py --exp "$name" --paper bench/experiments/paper_mu.csv \
@@ -304,9 +313,21 @@ report_u() {
     curves U "U: 100.16_2 at 100 updates, training" --metrics reward,mu $RUNS/U/*/*/seed*/log.csv
 }
 
+# The baselines of every experiment whose models have finished (each skipped when there):
+# for a campaign that finished before a baseline was added.
+baselines() {
+    [ -d "$RUNS/A" ] && greedy A 6.4_2,8.6_2,10.6_4,100.16_2,14.10_4,12.8_4
+    [ -d "$RUNS/B" ] && greedy B 6.4_2,12.8_4,18.12_6,24.16_8
+    [ -d "$RUNS/C" ] && greedy C "$ZERO_SHOT_SETUPS${BEYOND:+,$BEYOND}"
+    [ -d "$RUNS/D" ] && greedy D 6.4_2,12.8_4,18.12_6,24.16_8
+    [ -d "$RUNS/U" ] && greedy U 100.16_2
+    return 0
+}
+
 case "${1:-}" in
     A) exp_a ;; B) exp_b ;; R) exp_r ;; C) exp_c ;; D) exp_d ;; U) exp_u ;;
     all) exp_a; exp_b; exp_c; exp_d; exp_r ;;
     report) report_all ;;
+    baselines) baselines ;;
     *) sed -n '2,26p' "$0"; exit 2 ;;
 esac
