@@ -171,6 +171,10 @@ def main():
     if a.logs:
         paper_runs = defaultdict(list)
         for f in a.logs:
+            # a run in flight (no .done) has no evaluation yet: its partial log must not
+            # count either, or the column mixes seeds the table says it has not
+            if not os.path.exists(os.path.join(os.path.dirname(os.path.realpath(f)), ".done")):
+                continue
             setup, model, v = last100(f)
             paper_runs[(setup, model)].append((v[2],))
         proto = "mean over its last 100 training episodes"

@@ -111,3 +111,19 @@ def test_fig5_counts_episodes_and_says_the_same_in_updates(tmp_path):
     for seed in range(3):
         fig5_run(tmp_path, seed, lambda u: 500.0 * min(u, 5) / 5)
     assert "**reproduced**" in fig5_row(tmp_path)
+
+
+def test_table_i_protocol_column_counts_finished_runs_only(tmp_path):
+    fake_run(tmp_path, "smappo", 0, 30.0, 100.0, 0.92)
+    fake_run(tmp_path, "smappo", 1, 30.0, 100.0, 0.50)
+    (tmp_path / "U" / "100.16_2" / "smappo" / "seed1" / ".done").unlink()  # in flight
+    out = tmp_path / "U.md"
+    subprocess.run(
+        [sys.executable, str(ROOT / "bench/experiments/table.py"), "--exp", "U",
+         "--paper", str(ROOT / "bench/experiments/paper_mu.csv"), "--out", str(out),
+         "T", "1", "0 1 2", str(tmp_path / "U/100.16_2/smappo/seed0/eval/results.csv"),
+         "--logs", str(tmp_path / "U/100.16_2/smappo/seed0/log.csv"),
+         str(tmp_path / "U/100.16_2/smappo/seed1/log.csv")],
+        check=True, capture_output=True, text=True)
+    row = next(r for r in out.read_text().splitlines() if r.startswith("| 100.16_2 | smappo"))
+    assert "0.92 (0.00)" in row.split("|")[-3], row
