@@ -110,26 +110,19 @@ greedy() { # name setups: the scripted baselines on the experiment's setups (not
         "$T" eval --policy greedy --setups "$2" --episodes "$EVAL_EPISODES" --seeds "$EVAL_SEEDS" --out "$out" >/dev/null
     fi
     [ "$EXTRA" = 1 ] || return 0
-    out="$RUNS/$1/greedy-orca/eval"
-    if ! has_eval "$out/results.csv" "$2"; then
-        echo "== eval greedy-orca -> $out ($2)"
-        "$T" eval --policy greedy-orca --setups "$2" --episodes "$EVAL_EPISODES" --seeds "$EVAL_SEEDS" --out "$out" >/dev/null
-    fi
-    out="$RUNS/$1/matching-orca/eval"
-    if ! has_eval "$out/results.csv" "$2"; then
-        echo "== eval matching-orca -> $out ($2)"
-        "$T" eval --policy matching-orca --setups "$2" --episodes "$EVAL_EPISODES" --seeds "$EVAL_SEEDS" --out "$out" >/dev/null
-    fi
+    # uniform random moves: the floor a model must rise above (at 100.16_2 random walkers
+    # already keep MU near 0.56)
+    local p
+    for p in greedy-orca matching-orca random; do
+        out="$RUNS/$1/$p/eval"
+        if ! has_eval "$out/results.csv" "$2"; then
+            echo "== eval $p -> $out ($2)"
+            "$T" eval --policy "$p" --setups "$2" --episodes "$EVAL_EPISODES" --seeds "$EVAL_SEEDS" --out "$out" >/dev/null
+        fi
+    done
     # the shipped target-menu policy (trained on 6.4_2 behind the ORCA filter, evaluated as
     # robot_node runs it): evaluation only, never trained here
     evaluate policy/pretrained/smappo_6.4_2.safetensors "$2" "$RUNS/$1/shipped/eval"
-    # uniform random moves: the floor a model must rise above (at 100.16_2 random walkers
-    # already keep MU near 0.56)
-    out="$RUNS/$1/random/eval"
-    if ! has_eval "$out/results.csv" "$2"; then
-        echo "== eval random -> $out ($2)"
-        "$T" eval --policy random --setups "$2" --episodes "$EVAL_EPISODES" --seeds "$EVAL_SEEDS" --out "$out" >/dev/null
-    fi
 }
 
 plot_bin() { # a tending that has `plot` (TENDING may be an older copy)
@@ -180,11 +173,13 @@ retrain() { # name setup episodes: both models and every seed trained on setup, 
     done
 }
 
+A_SETUPS="6.4_2 8.6_2 10.6_4 100.16_2 14.10_4 12.8_4"  # with FULL_100; in running order
+STAGES=6.4_2,12.8_4,18.12_6,24.16_8  # B's and D's curriculum stages
 exp_a() {
     # cheapest verdicts first: 100.16_2's 100 episodes cost about an hour for all six runs
     # and settle the "53 % more parts" claim; 14.10_4 holds Fig. 5; 12.8_4 one Table I row
     local setups="6.4_2 8.6_2 10.6_4 14.10_4 12.8_4"
-    [ "${FULL_100:-0}" = 1 ] && setups="6.4_2 8.6_2 10.6_4 100.16_2 14.10_4 12.8_4"
+    [ "${FULL_100:-0}" = 1 ] && setups="$A_SETUPS"
     local s e
     for s in $setups; do
         e=$(eps 2000); [ "$s" = 100.16_2 ] && e=$(eps 100)
@@ -259,10 +254,10 @@ curriculum() { # name initial-episodes
         for m in smappo mappo; do
             local out="$RUNS/$name/$m/seed$seed"
             train "$out" "$m" "$seed" "$cfg" --curriculum "$sched"
-            evaluate "$out/policy.safetensors" 6.4_2,12.8_4,18.12_6,24.16_8 "$out/eval"
+            evaluate "$out/policy.safetensors" "$STAGES" "$out/eval"
         done
     done
-    greedy "$name" 6.4_2,12.8_4,18.12_6,24.16_8
+    greedy "$name" "$STAGES"
 }
 
 exp_b() { curriculum B 2000; report_curriculum B "B: curriculum"; }
@@ -316,10 +311,10 @@ report_u() {
 # The baselines of every experiment whose models have finished (each skipped when there):
 # for a campaign that finished before a baseline was added.
 baselines() {
-    [ -d "$RUNS/A" ] && greedy A 6.4_2,8.6_2,10.6_4,100.16_2,14.10_4,12.8_4
-    [ -d "$RUNS/B" ] && greedy B 6.4_2,12.8_4,18.12_6,24.16_8
+    [ -d "$RUNS/A" ] && greedy A "${A_SETUPS// /,}"
+    [ -d "$RUNS/B" ] && greedy B "$STAGES"
     [ -d "$RUNS/C" ] && greedy C "$ZERO_SHOT_SETUPS${BEYOND:+,$BEYOND}"
-    [ -d "$RUNS/D" ] && greedy D 6.4_2,12.8_4,18.12_6,24.16_8
+    [ -d "$RUNS/D" ] && greedy D "$STAGES"
     [ -d "$RUNS/U" ] && greedy U 100.16_2
     return 0
 }
