@@ -6,7 +6,7 @@
 use crate::records::{self, PartsBoundRecord};
 use anyhow::{Context, Result};
 use clap::Args;
-use policy::train::eval::eval_env_seed;
+use learn::eval::eval_env_seed;
 use sim::{parts_bound, Env};
 use std::path::PathBuf;
 

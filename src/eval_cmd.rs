@@ -7,7 +7,7 @@ use crate::report::{self, Numbers};
 use crate::stats::markdown_table;
 use anyhow::{bail, Context, Result};
 use clap::Args;
-use policy::train::evaluate;
+use learn::evaluate;
 use sim::Setup;
 use std::path::PathBuf;
 

@@ -1,5 +1,5 @@
-//! `tending`: the command line of the project (simulate, benchmark; train, eval and the
-//! fleet join as their crates land).
+//! `tending`: the command line of the project: simulate, evaluate, train, run a ROS 2 fleet,
+//! record and read bags, plot, benchmark. Thin commands: the logic is in the crates below.
 
 mod bag_cmd;
 mod bench_sim;

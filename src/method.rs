@@ -1,10 +1,10 @@
-//! The method `tending sim` and `tending eval` run (`policy::train::Method`): a scripted
+//! The method `tending sim` and `tending eval` run (`learn::Method`): a scripted
 //! method by name, or a checkpoint with its safety-layer flags, and the label their tables
 //! show it under.
 
 use anyhow::{bail, Context, Result};
+use learn::Method;
 use plan::{Deployment, FilterMargins, Margins, Safety, ScriptMargins};
-use policy::train::Method;
 use policy::Policy;
 use std::path::Path;
 
@@ -142,7 +142,7 @@ pub fn mode(ctrl: &Method) -> &'static str {
 /// `--margins FILE` (plan::margins), or the deployed margins without one.
 pub fn margins(path: &Option<std::path::PathBuf>) -> Result<Margins> {
     match path {
-        Some(p) => Margins::load(p).map_err(|e| anyhow::anyhow!("--margins {e}")),
+        Some(p) => Ok(Margins::load(p).context("--margins")?),
         None => Ok(Margins::default()),
     }
 }

@@ -1,6 +1,6 @@
 //! `tending sim`: episodes of a scripted baseline or a checkpoint, a metrics table, an
 //! optional animation of the first episode. Episodes run through `tending eval`'s episode
-//! runner ([`policy::train::run_episode_watched`]), so for the same setup, seed and
+//! runner ([`learn::run_episode_watched`]), so for the same setup, seed and
 //! controller both commands report the same numbers.
 
 use crate::method::CheckpointFlags;
@@ -9,7 +9,7 @@ use crate::report::{self, Numbers};
 use crate::stats::markdown_table;
 use anyhow::{bail, Context, Result};
 use clap::Args;
-use policy::train::{evaluate, run_episode_watched, Method};
+use learn::{evaluate, run_episode_watched, Method};
 use sim::{Env, Metrics, ScenarioConfig, Setup};
 use std::path::PathBuf;
 

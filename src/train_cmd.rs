@@ -12,7 +12,7 @@ use crate::records::{self, TrainLogRecord};
 use anyhow::{anyhow, bail, Context, Result};
 use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
-use policy::train::{parse_curriculum, SetupRange, Stage, TrainConfig, Trainer};
+use learn::{parse_curriculum, SetupRange, Stage, TrainConfig, Trainer};
 use policy::ModelKind;
 use std::io::Write;
 use std::path::{Path, PathBuf};
@@ -207,8 +207,7 @@ pub fn run(a: TrainArgs) -> Result<()> {
             m => bail!("unknown --model `{m}`: expected smappo or mappo"),
         };
         let cfg = match &a.config {
-            Some(p) => TrainConfig::from_toml(&std::fs::read_to_string(p)?)
-                .map_err(|e| anyhow::anyhow!("{}: {e}", p.display()))?,
+            Some(p) => TrainConfig::load(p)?,
             None => TrainConfig::default(),
         };
         let scenario = crate::sim_cmd::load_config(&a.scenario)?;

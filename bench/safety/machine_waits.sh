@@ -7,7 +7,7 @@
 # Usage: bench/safety/machine_waits.sh  (EPISODES, SEEDS, OUT override)
 set -euo pipefail
 cd "$(dirname "$0")/../.."
-cargo build --release -p policy --features train --example machine_waits
+cargo build --release -p learn --example machine_waits
 bin=target/release/examples/machine_waits
 ck=policy/pretrained/smappo_6.4_2.safetensors
 eps="${EPISODES:-50}"

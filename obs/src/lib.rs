@@ -13,9 +13,13 @@
 //! that share the same entity counts, stored row-major and contiguous so networks can run
 //! one GEMM per group.
 //!
+//! The move table ([`action`]) lives here too: it is what an observation's actions mean, to the
+//! simulator and to every controller above.
+//!
 //! What a robot does with its observation (the scripted controllers, the target menu, the
 //! ORCA filter, the shield) is the planner's, in the `plan` crate above this one.
 
+pub mod action;
 mod flat;
 
 pub use flat::{FlatLayout, FLAT_PAD};

@@ -1,7 +1,7 @@
 //! What a robot knows about its fleet as parameters, and the one place the planner's
 //! parameter sets are built from it.
 //!
-//! The simulator fills [`FleetParams`] from its scenario config (`sim::baselines::fleet_params`),
+//! The simulator fills [`FleetParams`] from its scenario config (`learn::baselines::fleet_params`),
 //! robot_node from its ROS parameters; both then take [`FleetParams::greedy_params`],
 //! [`FleetParams::orca_params`] and [`FleetParams::shield_params`] from here, so an offline
 //! episode and a fleet of robot nodes plan with the same numbers.

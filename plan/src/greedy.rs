@@ -26,7 +26,7 @@ pub struct GreedyParams {
 
 impl Default for GreedyParams {
     /// The default scenario's at scale 1 (sim's `SizeConfig`, `TaskConfig` and `dt`
-    /// defaults; `sim::baselines` tests that they agree).
+    /// defaults; `learn::baselines` tests that they agree).
     fn default() -> Self {
         Self {
             robot_radius: 0.08,

@@ -18,7 +18,6 @@
 //!   filter is on ([`Safety`]);
 //! - [`margins`]: the filter's and greedy-ORCA's margins as a named TOML file.
 
-pub mod action;
 pub mod detour;
 pub mod fleet;
 pub mod geom;

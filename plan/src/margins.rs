@@ -63,9 +63,13 @@ impl Margins {
         Ok(m)
     }
 
-    pub fn load(path: &Path) -> Result<Self, String> {
-        let text = std::fs::read_to_string(path).map_err(|e| format!("{}: {e}", path.display()))?;
-        Self::from_toml(&text, &path.display().to_string())
+    /// The margins file at `path`; errors name it and say whether it is missing,
+    /// unreadable or malformed (crate `inputs`).
+    pub fn load(path: &Path) -> Result<Self, inputs::InputError> {
+        inputs::parse_text("margins file", path, |text| {
+            let m: Margins = toml::from_str(text).map_err(|e| e.to_string())?;
+            m.check().map(|()| m)
+        })
     }
 
     fn check(&self) -> Result<(), String> {

@@ -3,7 +3,7 @@
 //!
 //! actor output -> (shield: unsafe moves masked before the choice) -> action -> menu
 //! target and planner (target actions, `crate::targets`) or the move's velocity
-//! (`crate::action`) -> ORCA filter (`crate::orca`) -> velocity.
+//! (`obs::action`) -> ORCA filter (`crate::orca`) -> velocity.
 //!
 //! Which safety layer a learned policy runs behind is decided once, by [`Safety::choose`]
 //! (docs/adr/0011): on the robot the ORCA filter is on unless refused or replaced by the
@@ -11,13 +11,13 @@
 //! pilot too: a target-action "policy" that always asks for the "matched" entry
 //! ([`MatchingOrca`]).
 
-use crate::action;
 use crate::fleet::FleetParams;
 use crate::orca::{
     GreedyOrca, OrcaParams, FILTER_CLEARANCE, FILTER_OBSTACLE_HORIZON, FILTER_REST_CLEARANCE,
 };
 use crate::shield::{self, ShieldParams};
 use crate::targets::TargetAction;
+use obs::action;
 use obs::ObsBatch;
 
 /// One robot's observation row, in `ObsBatch`'s layout.

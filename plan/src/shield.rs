@@ -18,7 +18,7 @@ use crate::geom::{box_distance, norm};
 
 /// The discrete moves as unit directions (the paper's 5, then 4 diagonals): the shield
 /// judges all 9, a 5-action policy's logits take the first 5.
-pub use crate::action::MOVES;
+pub use obs::action::MOVES;
 
 /// Logit given to a masked action: far below any real logit, finite so that softmax,
 /// log-probabilities and entropy stay finite (exp underflows to exactly 0).
@@ -73,12 +73,12 @@ pub fn safe_actions(
     storages: &[f32],
     peers: &[f32],
     p: &ShieldParams,
-) -> [bool; crate::action::N_ACTIONS_WITH_DIAGONALS] {
+) -> [bool; obs::action::N_ACTIONS_WITH_DIAGONALS] {
     let r = p.robot_radius;
     let step = p.k_speed * p.dt;
     let has_part = own[2] > 0.5;
     let pos = [own[0], own[1]];
-    let mut safe = [true; crate::action::N_ACTIONS_WITH_DIAGONALS];
+    let mut safe = [true; obs::action::N_ACTIONS_WITH_DIAGONALS];
     for (a, mv) in MOVES.iter().enumerate().skip(1) {
         let next = [mv[0] * step, mv[1] * step];
         // Unsafe: the gap after the move is below the limit and smaller than now.

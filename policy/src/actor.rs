@@ -7,8 +7,8 @@ use crate::encoder::{EncoderCache, SmappoEncoder};
 use crate::error::{check_len, PolicyError};
 use crate::head::{HeadCache, RecurrentHead};
 use crate::mlp_base::{MlpBase, MlpCache};
-use crate::nn::{categorical, sized, Adam, AdamConfig, ParamStore};
 use crate::sequences::Sequences;
+use nn::{categorical, sized, Adam, AdamConfig, ParamStore};
 use obs::{FlatLayout, ObsBatch, ObsError};
 use rand::SeedableRng;
 

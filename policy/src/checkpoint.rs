@@ -12,8 +12,8 @@
 //! Loading never panics on bad input: every problem is a [`CheckpointError`] naming it.
 
 use crate::config::{ArchConfig, ModelKind};
-use crate::nn::{AdamConfig, ParamStore};
 use crate::{Actor, Critic};
+use nn::{AdamConfig, ParamStore};
 use safetensors::tensor::{Dtype, SafeTensors, TensorView};
 use serde::{Deserialize, Serialize};
 use std::collections::{BTreeSet, HashMap};
@@ -30,6 +30,8 @@ pub enum CheckpointError {
         path: PathBuf,
         source: std::io::Error,
     },
+    #[error(transparent)]
+    Input(#[from] inputs::InputError),
     #[error("checkpoint is not a valid safetensors file (truncated or corrupt?): {0}")]
     Corrupt(String),
     #[error("checkpoint metadata: {0}")]
@@ -171,10 +173,7 @@ pub fn save_policy(
 }
 
 fn read(path: &Path) -> Result<Vec<u8>, CheckpointError> {
-    std::fs::read(path).map_err(|source| CheckpointError::Io {
-        path: path.to_path_buf(),
-        source,
-    })
+    Ok(inputs::read_bytes("checkpoint", path)?)
 }
 
 fn parse_meta(bytes: &[u8], format: &str) -> Result<serde_json::Value, CheckpointError> {

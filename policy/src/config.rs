@@ -46,11 +46,11 @@ impl From<obs::FlatLayout> for FlatLayoutConfig {
     }
 }
 
-/// What the actor's outputs mean (`plan::action`, `plan::targets`).
+/// What the actor's outputs mean (`obs::action`, `plan::targets`).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
 #[serde(rename_all = "lowercase")]
 pub enum ActionSpace {
-    /// Velocity moves of `plan::action::MOVES`: the paper's 5 axis moves, or 9 with the
+    /// Velocity moves of `obs::action::MOVES`: the paper's 5 axis moves, or 9 with the
     /// diagonals. Checkpoints from before this field are moves.
     #[default]
     Moves,
@@ -63,7 +63,7 @@ impl ActionSpace {
     pub fn allows(self, n: usize) -> bool {
         match self {
             ActionSpace::Moves => {
-                n == plan::action::N_AXIS_ACTIONS || n == plan::action::N_ACTIONS_WITH_DIAGONALS
+                n == obs::action::N_AXIS_ACTIONS || n == obs::action::N_ACTIONS_WITH_DIAGONALS
             }
             ActionSpace::Targets => plan::targets::menu_size_ok(n),
         }

@@ -18,11 +18,11 @@ use crate::error::{check_len, PolicyError};
 use crate::factored_input::FactoredRows;
 use crate::head::{HeadCache, RecurrentHead};
 use crate::mlp_base::{MlpBase, MlpCache};
-use crate::nn::{
+use crate::sequences::Sequences;
+use nn::{
     sized, tanh, Adam, AdamConfig, Init, Kv, LayerNorm, LayerNormConfig, Linear, LinearConfig,
     MhaCache, MhaConfig, MultiHeadAttention, ParamStore, Slot,
 };
-use crate::sequences::Sequences;
 use obs::{FlatLayout, ObsBatch};
 use rand::{Rng, SeedableRng};
 

@@ -5,7 +5,7 @@
 //! The entity embeddings are never stored for the whole batch: the attention computes
 //! each row's from the raw features ([`Kv::Encoded`]).
 
-use crate::nn::{
+use nn::{
     relu, sized, tanh, Init, Kv, LayerNorm, LayerNormConfig, Linear, LinearConfig, MhaCache,
     MhaConfig, MultiHeadAttention, ParamStore,
 };

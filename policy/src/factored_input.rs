@@ -19,9 +19,10 @@
 //! against it). The row statistics are combined from per-block means and centred sums of
 //! squares (Chan et al.'s pairwise update), so no E[x^2] - E[x]^2 cancellation is added.
 
+use crate::factored_cache::FactoredCache;
 use crate::mlp_base::{MlpBase, MlpCache};
-use crate::nn::gemm::{gemm, rm, View};
-use crate::nn::sized;
+use nn::gemm::{gemm, rm, View};
+use nn::sized;
 
 /// Critic rows given as their own block plus one shared block per group of rows.
 #[derive(Debug, Clone, Copy)]
@@ -34,28 +35,6 @@ pub struct FactoredRows<'a> {
     pub d_sh: usize,
     /// consecutive rows sharing one shared block
     pub group: usize,
-}
-
-/// Buffers of the factored first layer.
-#[derive(Debug, Clone, Default)]
-pub struct FactoredCache {
-    /// gamma . own (rows x d_own)
-    g_own: Vec<f32>,
-    /// gamma . shared (groups x d_sh)
-    g_sh: Vec<f32>,
-    /// W_sh (gamma . shared) per group (groups x hidden)
-    sh_out: Vec<f32>,
-    /// W gamma, W beta + b (hidden each)
-    w_gamma: Vec<f32>,
-    w_beta: Vec<f32>,
-    // backward
-    xhat_own: Vec<f32>,
-    d_own: Vec<f32>,
-    u_group: Vec<f32>,
-    u_mu: Vec<f32>,
-    da_sum: Vec<f32>,
-    t_sh: Vec<f32>,
-    dcol: Vec<f32>,
 }
 
 /// Mean and centred sum of squares of `x`.
@@ -383,8 +362,8 @@ fn transposed(a: &[f32], cols: usize) -> View<'_> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::nn::gradcheck::rand_vec;
-    use crate::nn::ParamStore;
+    use nn::gradcheck::rand_vec;
+    use nn::ParamStore;
     use rand::SeedableRng;
 
     /// The concatenated rows the factored ones stand for.

@@ -1,6 +1,6 @@
 //! The recurrent tail shared by actors and critics: GRU -> LayerNorm -> Linear.
 
-use crate::nn::{
+use nn::{
     sized, Gru, GruCache, GruConfig, Init, LayerNorm, LayerNormConfig, Linear, LinearConfig,
     ParamStore,
 };

@@ -4,8 +4,8 @@
 use crate::checkpoint::{load_policy, CheckpointError, CheckpointMeta};
 use crate::config::ModelKind;
 use crate::error::PolicyError;
-use crate::nn::categorical;
 use crate::Actor;
+use nn::categorical;
 use obs::ObsBatch;
 use std::path::Path;
 

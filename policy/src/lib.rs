@@ -1,8 +1,9 @@
 //! `policy`: SMAPPO and MAPPO networks with hand-written forward/backward passes,
 //! on-robot inference and safetensors checkpoints.
 //!
-//! - [`nn`]: layers (Linear, LayerNorm, Tanh, ReLU, one-query multi-head attention, GRU,
-//!   categorical head, Adam, gradient clipping) over a flat [`nn::ParamStore`];
+//! The layers are crate `nn`'s; training and the episode runner are crate `learn`'s, above
+//! this one, so a robot's binary carries neither the simulator nor the trainer.
+//!
 //! - [`Actor`] / [`Critic`]: training networks (chunk forward/backward, PPO losses over
 //!   [`Sequences`], rollout steps);
 //! - [`Policy`]: what `robot_node` loads; [`checkpoint`]: safetensors files.
@@ -13,14 +14,12 @@ pub mod config;
 pub mod critic;
 pub mod encoder;
 pub mod error;
+mod factored_cache;
 pub mod factored_input;
 pub mod head;
 pub mod inference;
 pub mod mlp_base;
-pub mod nn;
 pub mod sequences;
-#[cfg(feature = "train")]
-pub mod train;
 
 pub use actor::{Actor, ActorLossStats, PpoActorConfig};
 pub use checkpoint::{CheckpointError, CheckpointMeta};

@@ -1,7 +1,7 @@
 //! MAPPO's MLP base: LayerNorm on the raw input (feature normalisation), then
 //! [Linear -> ReLU -> LayerNorm] x 2 (layer_N = 1 in the reference implementation).
 
-use crate::nn::{relu, sized, Init, LayerNorm, LayerNormConfig, Linear, LinearConfig, ParamStore};
+use nn::{relu, sized, Init, LayerNorm, LayerNormConfig, Linear, LinearConfig, ParamStore};
 use rand::Rng;
 
 #[derive(Debug, Clone, Copy)]
@@ -27,7 +27,7 @@ pub struct MlpCache {
     d_b: Vec<f32>,
     d_in: Vec<f32>,
     d_x: Vec<f32>,
-    pub(crate) fac: crate::factored_input::FactoredCache,
+    pub(crate) fac: crate::factored_cache::FactoredCache,
 }
 
 impl MlpCache {

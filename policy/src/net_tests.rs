@@ -1,8 +1,8 @@
 //! Whole-network tests: gradients, invariances, and that training, rollout and inference
 //! compute the same function.
 
-use crate::nn::gradcheck::{assert_grad_close, assert_grad_close_scaled, numeric_grad, rand_vec};
 use crate::{Actor, ArchConfig, Critic, ModelKind, PpoActorConfig, Sequences, ValueLossConfig};
+use nn::gradcheck::{assert_grad_close, assert_grad_close_scaled, numeric_grad, rand_vec};
 use obs::{Counts, FlatLayout, ObsBatch};
 use rand::{Rng, SeedableRng};
 
@@ -301,7 +301,7 @@ fn ppo_training_drives_losses_down() {
             (0..t * b)
                 .map(|r| {
                     let mut lp = [0.0; 5];
-                    crate::nn::categorical::log_softmax(&y[r * 5..(r + 1) * 5], &mut lp);
+                    nn::categorical::log_softmax(&y[r * 5..(r + 1) * 5], &mut lp);
                     lp[actions[r] as usize]
                 })
                 .collect()
@@ -360,7 +360,7 @@ fn ppo_gradient_matches_finite_differences_of_the_loss() {
     let old: Vec<f32> = (0..4)
         .map(|r| {
             let mut lp = [0.0; 5];
-            crate::nn::categorical::log_softmax(&y[r * 5..(r + 1) * 5], &mut lp);
+            nn::categorical::log_softmax(&y[r * 5..(r + 1) * 5], &mut lp);
             lp[actions[r] as usize] + [0.0, 0.5, -0.5, 0.05][r]
         })
         .collect();

@@ -77,5 +77,5 @@ pub(crate) fn greedy_actions(
 }
 
 pub(crate) fn greedy_params(env: &Env) -> GreedyParams {
-    sim::baselines::fleet_params(env.sizes(), env.config()).greedy_params()
+    learn::baselines::fleet_params(env.sizes(), env.config()).greedy_params()
 }

@@ -82,12 +82,12 @@ fn check_actions(
 const ACTION_NAMES: &str = "0 stay, 1 left, 2 right, 3 down, 4 up; with diagonal_actions \
                             5 left-down, 6 right-down, 7 left-up, 8 right-up";
 
-/// Actions per robot: the paper's 5, or 9 with the diagonals (`plan::action`).
+/// Actions per robot: the paper's 5, or 9 with the diagonals (`obs::action`).
 pub(crate) fn n_actions(diagonal: bool) -> usize {
     if diagonal {
-        plan::action::N_ACTIONS_WITH_DIAGONALS
+        obs::action::N_ACTIONS_WITH_DIAGONALS
     } else {
-        plan::action::N_AXIS_ACTIONS
+        obs::action::N_AXIS_ACTIONS
     }
 }
 

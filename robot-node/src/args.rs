@@ -193,7 +193,7 @@ where
         p.use_sim_time = true;
     }
     if let Some(f) = &p.margins {
-        let m = plan::Margins::load(f).map_err(|e| param_error("margins", e))?;
+        let m = plan::Margins::load(f).map_err(|e| param_error("margins", e.to_string()))?;
         if !m.greedy_orca.is_default() {
             return Err(param_error(
                 "margins",

@@ -65,7 +65,7 @@ impl GreedyController {
         Self { params }
     }
 
-    /// The discrete action (`plan::action::MOVES` index) for row 0 of `obs`.
+    /// The discrete action (`obs::action::MOVES` index) for row 0 of `obs`.
     pub fn action(&self, obs: &ObsBatch) -> anyhow::Result<u8> {
         let row = one_row(obs, "greedy")?;
         Ok(plan::greedy::greedy_action(
@@ -82,7 +82,7 @@ impl Controller for GreedyController {
     fn reset(&mut self) {}
     fn act(&mut self, obs: &ObsBatch) -> anyhow::Result<[f32; 2]> {
         let a = self.action(obs)?;
-        plan::action::velocity(a, self.params.k_speed)
+        obs::action::velocity(a, self.params.k_speed)
             .ok_or_else(|| anyhow::anyhow!("greedy gave action {a}"))
     }
     fn name(&self) -> &'static str {
@@ -229,9 +229,9 @@ impl PolicyController {
             self.shielded.clear();
             self.shielded.extend_from_slice(logits);
             pilot.shield_logits(Row::of(obs, 0), &mut self.shielded);
-            policy::nn::categorical::argmax(&self.shielded)
+            nn::categorical::argmax(&self.shielded)
         } else {
-            policy::nn::categorical::argmax(logits)
+            nn::categorical::argmax(logits)
         };
         Ok(a as u8)
     }
@@ -308,7 +308,7 @@ pub(crate) mod tests {
         .unwrap()
     }
 
-    // `plan::action::MOVES` indices the greedy tests expect
+    // `obs::action::MOVES` indices the greedy tests expect
     const STAY: u8 = 0;
     const DOWN: u8 = 3;
     const UP: u8 = 4;
@@ -401,7 +401,7 @@ pub(crate) mod tests {
         for _ in 0..3 {
             let a = reference.act(&o, &mut st, policy::ActMode::Greedy).unwrap();
             let v = c.act(&o).unwrap();
-            assert_eq!(Some(v), plan::action::velocity(a, 0.3));
+            assert_eq!(Some(v), obs::action::velocity(a, 0.3));
         }
         assert!(c.state().h.iter().any(|v| *v != 0.0));
         assert_eq!(c.state().h, st.h);

@@ -198,7 +198,7 @@ mod tests {
     use super::*;
 
     /// robot_node's default parameters describe the default scenario's fleet, and its
-    /// builders give what the simulator's give there (`sim::baselines` tests the other
+    /// builders give what the simulator's give there (`learn::baselines` tests the other
     /// side against the same defaults).
     #[test]
     fn default_parameters_are_the_default_fleet() {

@@ -18,11 +18,11 @@ fn offline_greedy(setup: Setup, seed: u64, steps: u32) -> Offline {
         setup,
         seed,
         steps,
-        |env| sim::baselines::fleet_params(env.sizes(), env.config()).greedy_params(),
+        |env| learn::baselines::fleet_params(env.sizes(), env.config()).greedy_params(),
         |params, batch, env| {
             let acts: Vec<u8> = (0..batch.rows)
                 .map(|r| {
-                    sim::plan::greedy::greedy_action(
+                    plan::greedy::greedy_action(
                         batch.own_row(r),
                         batch.machines_row(r),
                         batch.storages_row(r),

@@ -14,13 +14,13 @@ mod lockstep_common;
 
 use lockstep_common::{offline_episode, policy_with_states, pretrained, LockstepRun, Offline};
 
-use sim::plan::pilot::{self, FilterMargins, MatchingOrca, Outputs, Pilot, Row, Safety};
+use plan::pilot::{self, FilterMargins, MatchingOrca, Outputs, Pilot, Row, Safety};
 use sim::{Env, Setup};
 
 fn offline_greedy_orca(setup: Setup, seed: u64, steps: u32) -> Offline {
     let init = |env: &Env| {
         (
-            sim::baselines::GreedyOrcaFleet::new(env).unwrap(),
+            learn::baselines::GreedyOrcaFleet::new(env).unwrap(),
             Vec::new(),
         )
     };
@@ -33,7 +33,7 @@ fn offline_greedy_orca(setup: Setup, seed: u64, steps: u32) -> Offline {
 /// One pilot per robot of `env` (`plan::Pilot`, the path `tending eval` and robot_node
 /// drive a policy through) behind `safety`.
 fn pilots(env: &Env, outputs: Outputs, safety: Safety) -> Vec<Pilot> {
-    let fleet = sim::baselines::fleet_params(env.sizes(), env.config());
+    let fleet = learn::baselines::fleet_params(env.sizes(), env.config());
     vec![Pilot::new(&fleet, outputs, safety).unwrap(); env.n_robots()]
 }
 
@@ -65,7 +65,7 @@ fn offline_piloted(
                     let row = batch.row(r);
                     let mut l = pol.logits(&row, &mut states[r]).unwrap().to_vec();
                     pilots[r].shield_logits(Row::of(&row, 0), &mut l);
-                    policy::nn::categorical::argmax(&l) as u8
+                    nn::categorical::argmax(&l) as u8
                 })
                 .collect();
             pilot::commands(pilots, batch, &acts, vels);
@@ -86,7 +86,7 @@ fn offline_targets(setup: Setup, seed: u64, steps: u32, path: &std::path::Path) 
 /// robot always asks for the menu's "matched" entry, through the deployed ORCA filter.
 fn offline_matching_orca(setup: Setup, seed: u64, steps: u32) -> Offline {
     let init = |env: &Env| {
-        let fleet = sim::baselines::fleet_params(env.sizes(), env.config());
+        let fleet = learn::baselines::fleet_params(env.sizes(), env.config());
         let one = MatchingOrca::new(&fleet, FilterMargins::DEPLOYED).unwrap();
         (vec![one; env.n_robots()], Vec::new())
     };

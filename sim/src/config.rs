@@ -182,12 +182,15 @@ impl ScenarioConfig {
         Ok(cfg)
     }
 
+    /// The scenario file at `path`; errors name it and say whether it is missing,
+    /// unreadable or malformed (crate `inputs`).
     pub fn load(path: &std::path::Path) -> Result<Self, SimError> {
-        let text = std::fs::read_to_string(path).map_err(|e| SimError::ConfigParse {
-            source_name: path.display().to_string(),
-            message: e.to_string(),
-        })?;
-        Self::from_toml(&text, &path.display().to_string())
+        let text = inputs::read_text("scenario file", path)?;
+        let cfg: ScenarioConfig = toml::from_str(&text)
+            .map_err(|e| inputs::InputError::malformed("scenario file", path, e))?;
+        cfg.validate()
+            .map_err(|e| inputs::InputError::malformed("scenario file", path, e))?;
+        Ok(cfg)
     }
 
     /// TOML text with floats written as their shortest f32 form (2.3, not 2.299999952...).

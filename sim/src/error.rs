@@ -19,6 +19,8 @@ pub enum SimError {
         source_name: String,
         message: String,
     },
+    #[error(transparent)]
+    Input(#[from] inputs::InputError),
     #[error("command for robot {robot} is not finite: ({vx}, {vy})")]
     NonFiniteCommand { robot: u32, vx: f32, vy: f32 },
     #[error("expected {expected} commands (one per robot), got {got}")]

@@ -10,15 +10,12 @@
 //! - [`Env`]: one environment: step, pick/place, rewards, metrics, live add/remove.
 //! - [`VecEnv`]: many environments stepped together ([`fork`]: one run of envs per thread,
 //!   the caller included), deterministic whatever the thread count.
-//! - [`baselines`]: random actions, and the planner (crate `plan`, re-exported as
-//!   [`plan`] since its types are in this crate's API) on an environment's parameters.
 //! - [`parts_bound`]: the most parts any controller can deliver from an episode's layout.
 
 // Struct-of-arrays bodies are indexed in lockstep; iterator zips of 5+ arrays read worse.
 #![allow(clippy::needless_range_loop)]
 
 mod action;
-pub mod baselines;
 mod bound;
 mod config;
 mod entities;
@@ -40,7 +37,5 @@ pub use entities::{MachineId, RobotId, Sizes, StorageId};
 pub use env::{Env, MachineView, RobotEvents, RobotView, StorageView};
 pub use error::SimError;
 pub use metrics::Metrics;
-/// The planner crate, whose parameter types [`baselines`] takes and returns.
-pub use plan;
 pub use setup::Setup;
 pub use vec_env::{episode_seed, VecEnv};

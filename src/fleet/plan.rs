@@ -153,12 +153,12 @@ impl Plan {
             }
         }
         let cfg = match &a.scenario {
-            Some(p) => sim::ScenarioConfig::load(p).map_err(|e| anyhow!("{}: {e}", p.display()))?,
+            Some(p) => sim::ScenarioConfig::load(p).context("--scenario")?,
             None => sim::ScenarioConfig::default(),
         };
         let sizes = *sim::Env::new(cfg.clone(), setup, a.seed)?.sizes();
         let margins = match &a.margins {
-            Some(p) => plan::Margins::load(p).map_err(|e| anyhow!("--margins {e}"))?,
+            Some(p) => plan::Margins::load(p).context("--margins")?,
             None => plan::Margins::default(),
         };
         // robot_node runs greedy-ORCA with its built-in margins: refuse rather than ignore

@@ -2,7 +2,7 @@
 //! `tending train --resume` and `tending plot curves` read it).
 
 use super::decimals::{dp1, dp3, dp4, dp5, dp6};
-use policy::train::UpdateStats;
+use learn::UpdateStats;
 use serde::{Deserialize, Serialize};
 
 /// One update. Field order is the column order; the decimals are those log.csv has

@@ -138,7 +138,7 @@ fn refuses_truncated_corrupt_and_foreign_files() {
     assert!(load_policy(&p, None).is_err());
     assert!(matches!(
         load_policy(&tmp("does-not-exist"), None),
-        Err(CheckpointError::Io { .. })
+        Err(CheckpointError::Input(inputs::InputError::Missing { .. }))
     ));
 }
 
