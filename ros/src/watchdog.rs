@@ -21,7 +21,7 @@ use std::time::{Duration, Instant};
 pub const EXIT_WATCHDOG: i32 = 75;
 
 /// The stages of one kind of node (an enum with a `u8` representation): where its main
-/// path is, for the watchdog (not a curriculum stage of training, `policy::train::Stage`).
+/// path is, for the watchdog (not a curriculum stage of training, `learn::Stage`).
 pub trait NodeStage: Copy + Eq + fmt::Debug + Send + Sync + 'static {
     /// The stage a new watchdog starts in.
     const FIRST: Self;
