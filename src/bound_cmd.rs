@@ -14,16 +14,15 @@ use std::path::PathBuf;
 pub struct BoundArgs {
     #[command(flatten)]
     pub runs: crate::eval_cmd::Runs,
-    /// Scenario config (TOML); default: the simulator's defaults.
-    #[arg(long)]
-    pub scenario: Option<PathBuf>,
+    #[command(flatten)]
+    pub scenario: crate::scenario_args::ScenarioArgs,
     /// Write the per-seed means as CSV here.
     #[arg(long)]
     pub out: Option<PathBuf>,
 }
 
 pub fn run(a: BoundArgs) -> Result<()> {
-    let cfg = crate::sim_cmd::load_config(&a.scenario)?;
+    let cfg = a.scenario.load()?;
     let (setups, seeds) = a.runs.parse()?;
     let episodes = a.runs.episodes;
     let per_machine = cfg.world.episode_steps.div_ceil(cfg.task.prep_steps.max(1));

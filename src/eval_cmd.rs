@@ -44,9 +44,8 @@ pub struct EvalArgs {
     /// than those are named in the results' labels.
     #[arg(long)]
     pub margins: Option<PathBuf>,
-    /// Scenario config (TOML); default: the simulator's defaults.
-    #[arg(long)]
-    pub scenario: Option<PathBuf>,
+    #[command(flatten)]
+    pub scenario: crate::scenario_args::ScenarioArgs,
     /// Write results.md and results.csv into this directory.
     #[arg(long)]
     pub out: Option<PathBuf>,
@@ -107,7 +106,7 @@ pub fn run(a: EvalArgs) -> Result<()> {
         (Some(_), Some(_)) => bail!("--checkpoint and --policy are exclusive"),
     };
     let mode = crate::method::mode(&ctrl);
-    let cfg = crate::sim_cmd::load_config(&a.scenario)?;
+    let cfg = a.scenario.load()?;
     let (setups, seeds) = a.runs.parse()?;
     let episodes = a.runs.episodes;
 

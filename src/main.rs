@@ -15,6 +15,7 @@ mod plot_pareto;
 mod records;
 mod render;
 mod report;
+mod scenario_args;
 mod security_cmd;
 mod sim_cmd;
 mod stats;

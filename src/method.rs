@@ -142,7 +142,7 @@ pub fn mode(ctrl: &Method) -> &'static str {
 /// `--margins FILE` (plan::margins), or the deployed margins without one.
 pub fn margins(path: &Option<std::path::PathBuf>) -> Result<Margins> {
     match path {
-        Some(p) => Ok(Margins::load(p).context("--margins")?),
+        Some(p) => Margins::load(p).map_err(|e| anyhow::anyhow!("--margins: {e}")),
         None => Ok(Margins::default()),
     }
 }

@@ -39,10 +39,8 @@ pub struct SimArgs {
     pub episodes: u64,
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
-    /// Scenario config (TOML); defaults are documented in sim/src/config.rs. (`--config`,
-    /// its old name, still works.)
-    #[arg(long, alias = "config")]
-    pub scenario: Option<PathBuf>,
+    #[command(flatten)]
+    pub scenario: crate::scenario_args::ScenarioArgs,
     /// Safety margins (TOML, plan::margins, e.g. configs/margins/*.toml); default: the
     /// deployed ones.
     #[arg(long)]
@@ -51,13 +49,6 @@ pub struct SimArgs {
     /// PNG frames (ends with /).
     #[arg(long)]
     pub render: Option<PathBuf>,
-}
-
-pub fn load_config(path: &Option<PathBuf>) -> Result<ScenarioConfig> {
-    Ok(match path {
-        Some(p) => ScenarioConfig::load(p)?,
-        None => ScenarioConfig::default(),
-    })
 }
 
 /// The controller the arguments name, and its label for the table.
@@ -106,7 +97,7 @@ fn episodes(a: &SimArgs, cfg: &ScenarioConfig) -> Result<(String, Vec<Metrics>)>
 }
 
 pub fn run(a: SimArgs) -> Result<()> {
-    let cfg = load_config(&a.scenario)?;
+    let cfg = a.scenario.load()?;
     let t0 = std::time::Instant::now();
     let (label, ms) = episodes(&a, &cfg)?;
     let setup: Setup = a.setup.parse()?;

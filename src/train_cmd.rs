@@ -49,9 +49,8 @@ pub struct TrainArgs {
     /// Training hyper-parameters (TOML, see policy/src/train/config.rs).
     #[arg(long)]
     pub config: Option<PathBuf>,
-    /// Scenario config (TOML); default: the simulator's defaults.
-    #[arg(long)]
-    pub scenario: Option<PathBuf>,
+    #[command(flatten)]
+    pub scenario: crate::scenario_args::ScenarioArgs,
     /// Continue the run in --out from its trainer state (config, seed, schedule restored;
     /// --setup/--episodes/--curriculum/--randomize, when given, replace the schedule).
     #[arg(long)]
@@ -210,7 +209,7 @@ pub fn run(a: TrainArgs) -> Result<()> {
             Some(p) => TrainConfig::load(p)?,
             None => TrainConfig::default(),
         };
-        let scenario = crate::sim_cmd::load_config(&a.scenario)?;
+        let scenario = a.scenario.load()?;
         let mut t = if let Some((r, eps)) = range {
             Trainer::new_randomized(kind, cfg, scenario, r, eps.unwrap_or(2000), a.seed)
                 .context("--randomize")?

@@ -163,6 +163,48 @@ pub fn run_episode_hooked(
     Ok(*env.metrics())
 }
 
+/// Where an episode's time went, single-threaded: deciding (observation, network, planner,
+/// filter: everything a robot computes) against stepping the physics.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct EpisodeTiming {
+    pub decide_secs: f64,
+    pub physics_secs: f64,
+    /// Robot-steps decided (robots x steps).
+    pub robot_decisions: u64,
+}
+
+impl EpisodeTiming {
+    /// Mean decision time per robot per step, microseconds.
+    pub fn us_per_decision(&self) -> f64 {
+        1e6 * self.decide_secs / self.robot_decisions.max(1) as f64
+    }
+}
+
+/// [`run_episode`] with its time split into deciding and physics (docs/bench/scale.md).
+pub fn run_episode_timed(
+    ctrl: &Method,
+    cfg: &ScenarioConfig,
+    setup: Setup,
+    seed: u64,
+    episode: u64,
+) -> Result<(Metrics, EpisodeTiming), TrainError> {
+    let mut env = Env::new(cfg.clone(), setup, eval_env_seed(seed, episode))?;
+    let mut rng = ChaCha8Rng::seed_from_u64(episode_seed(seed ^ 0x0005_EED0_FAC7, 1, episode));
+    let mut driver = Driver::new(ctrl, &env)?;
+    let mut obs = ObsBatch::default();
+    let mut t = EpisodeTiming::default();
+    while !env.is_done() {
+        let start = std::time::Instant::now();
+        let physics_before = driver.physics;
+        t.robot_decisions += env.n_robots() as u64;
+        driver.step(&mut env, &mut obs, &mut rng, &mut |_, _| {})?;
+        let physics = (driver.physics - physics_before).as_secs_f64();
+        t.physics_secs += physics;
+        t.decide_secs += start.elapsed().as_secs_f64() - physics;
+    }
+    Ok((*env.metrics(), t))
+}
+
 /// A learned actor's state during an episode.
 struct ActorRun {
     actor: Actor,
@@ -181,8 +223,20 @@ enum Decider {
     Entry(u8),
 }
 
-/// A controller's per-episode state: what it steps the environment with.
-enum Driver {
+/// A controller's per-episode state, and the time its physics steps took.
+struct Driver {
+    kind: DriverKind,
+    physics: std::time::Duration,
+}
+
+/// One step's commands: discrete actions or velocities.
+enum Command {
+    Actions(Vec<u8>),
+    Velocities(Vec<[f32; 2]>),
+}
+
+/// What a controller steps the environment with.
+enum DriverKind {
     Random,
     Greedy(GreedyParams),
     GreedyOrca(GreedyOrcaFleet),
@@ -200,18 +254,18 @@ impl Driver {
             let one = Pilot::new(&fleet, outputs, safety).map_err(TrainError::Config)?;
             Ok(vec![one; n])
         };
-        Ok(match ctrl {
-            Method::Random => Driver::Random,
-            Method::Greedy => Driver::Greedy(fleet.greedy_params()),
+        let kind = match ctrl {
+            Method::Random => DriverKind::Random,
+            Method::Greedy => DriverKind::Greedy(fleet.greedy_params()),
             Method::GreedyOrca {
                 clearance,
                 obstacle_horizon,
-            } => Driver::GreedyOrca(GreedyOrcaFleet::with_margins(
+            } => DriverKind::GreedyOrca(GreedyOrcaFleet::with_margins(
                 env,
                 *clearance,
                 *obstacle_horizon,
             )?),
-            Method::MatchingOrca { margins } => Driver::Piloted {
+            Method::MatchingOrca { margins } => DriverKind::Piloted {
                 decider: Decider::Entry(MatchingOrca::ENTRY as u8),
                 pilots: pilots(Outputs::Targets, Safety::filtered(*margins))?,
             },
@@ -219,7 +273,7 @@ impl Driver {
                 actor,
                 sample,
                 safety,
-            } => Driver::Piloted {
+            } => DriverKind::Piloted {
                 pilots: pilots(actor.arch.actions.outputs(), *safety)?,
                 decider: Decider::Actor(Box::new(ActorRun {
                     h: vec![0.0; n * actor.hidden()],
@@ -229,6 +283,10 @@ impl Driver {
                     sample: *sample,
                 })),
             },
+        };
+        Ok(Self {
+            kind,
+            physics: std::time::Duration::ZERO,
         })
     }
 
@@ -241,13 +299,15 @@ impl Driver {
         on_actions: &mut impl FnMut(&ObsBatch, &[u8]),
     ) -> Result<(), TrainError> {
         let n = env.n_robots();
-        match self {
-            Driver::Random => {
+        // Each arm decides and returns what the physics steps with, so that the physics
+        // step is timed apart from the decision (run_episode_timed).
+        let cmd = match &mut self.kind {
+            DriverKind::Random => {
                 let actions: Vec<u8> = (0..n).map(|_| random_action(rng)).collect();
                 on_actions(obs, &actions);
-                env.step_actions(&actions)?;
+                Command::Actions(actions)
             }
-            Driver::Greedy(params) => {
+            DriverKind::Greedy(params) => {
                 env.observe(obs);
                 let actions: Vec<u8> = (0..n)
                     .map(|r| {
@@ -256,15 +316,15 @@ impl Driver {
                     })
                     .collect();
                 on_actions(obs, &actions);
-                env.step_actions(&actions)?;
+                Command::Actions(actions)
             }
-            Driver::GreedyOrca(fleet) => {
+            DriverKind::GreedyOrca(fleet) => {
                 env.observe(obs);
                 let mut vels = Vec::with_capacity(n);
                 fleet.act(obs, &mut vels)?;
-                env.step_velocities(&vels)?;
+                Command::Velocities(vels)
             }
-            Driver::Piloted { decider, pilots } => {
+            DriverKind::Piloted { decider, pilots } => {
                 env.observe(obs);
                 let actions = match decider {
                     Decider::Entry(a) => vec![*a; n],
@@ -273,9 +333,15 @@ impl Driver {
                 on_actions(obs, &actions);
                 let mut vels = Vec::with_capacity(n);
                 pilot::commands(pilots, obs, &actions, &mut vels);
-                env.step_velocities(&vels)?;
+                Command::Velocities(vels)
             }
+        };
+        let start = std::time::Instant::now();
+        match cmd {
+            Command::Actions(a) => env.step_actions(&a)?,
+            Command::Velocities(v) => env.step_velocities(&v)?,
         }
+        self.physics += start.elapsed();
         Ok(())
     }
 }

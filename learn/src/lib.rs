@@ -19,7 +19,9 @@ pub mod trainer;
 pub mod valuenorm;
 
 pub use config::TrainConfig;
-pub use eval::{evaluate, run_episode, run_episode_watched, Method};
+pub use eval::{
+    evaluate, run_episode, run_episode_timed, run_episode_watched, EpisodeTiming, Method,
+};
 pub use randomize::SetupRange;
 pub use trainer::{format_curriculum, parse_curriculum, Stage, TrainError, Trainer, UpdateStats};
 pub use valuenorm::ValueNorm;

@@ -21,8 +21,10 @@
 
 pub mod action;
 mod flat;
+pub mod nearest;
 
 pub use flat::{FlatLayout, FLAT_PAD};
+pub use nearest::Bound;
 
 /// Features of the robot itself: x, y, has_part.
 pub const SELF_DIM: usize = 3;
@@ -210,7 +212,7 @@ impl ObsBatch {
 }
 
 /// Builder for one robot's observation from plain entity lists (what `robot_node` has).
-#[derive(Debug, Clone, Default)]
+#[derive(Debug, Clone, Default, PartialEq)]
 pub struct ObsBuilder {
     pub own_pos: [f32; 2],
     pub has_part: bool,
@@ -223,6 +225,31 @@ pub struct ObsBuilder {
 }
 
 impl ObsBuilder {
+    /// Keep only what `bound` lets the robot observe: the k nearest of each bounded group
+    /// by the simulator's rule ([`nearest::Nearest`]), in the order given.
+    pub fn bounded(mut self, bound: &Bound) -> Self {
+        if !bound.is_bounded() {
+            return self;
+        }
+        let mut pick = nearest::Nearest::default();
+        let me = self.own_pos;
+        let centres: Vec<[f32; 2]> = self.machines.iter().map(|m| m.0).collect();
+        let keep = pick
+            .select(me, &centres, bound.nearest_machines, None)
+            .to_vec();
+        self.machines = keep.iter().map(|&j| self.machines[j]).collect();
+        let keep = pick
+            .select(me, &self.storages, bound.nearest_storages, None)
+            .to_vec();
+        self.storages = keep.iter().map(|&j| self.storages[j]).collect();
+        let centres: Vec<[f32; 2]> = self.peers.iter().map(|p| p.0).collect();
+        let keep = pick
+            .select(me, &centres, bound.nearest_peers, None)
+            .to_vec();
+        self.peers = keep.iter().map(|&j| self.peers[j]).collect();
+        self
+    }
+
     /// Build the single-row batch (relative positions computed here, as the simulator does).
     pub fn build(&self) -> Result<ObsBatch, ObsError> {
         let counts = Counts {
@@ -259,6 +286,26 @@ pub fn flag(b: bool) -> f32 {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_bounded_builder_keeps_the_nearest_in_order() {
+        let b = ObsBuilder {
+            own_pos: [0.0, 0.0],
+            has_part: false,
+            machines: vec![([3.0, 0.0], true), ([1.0, 0.0], false), ([2.0, 0.0], true)],
+            storages: vec![[0.0, 5.0]],
+            peers: vec![
+                ([0.0, 0.5], true),
+                ([9.0, 9.0], false),
+                ([0.0, -1.0], false),
+            ],
+        };
+        let k2 = b.clone().bounded(&Bound::nearest(2));
+        assert_eq!(k2.machines, vec![([1.0, 0.0], false), ([2.0, 0.0], true)]);
+        assert_eq!(k2.storages, vec![[0.0, 5.0]]);
+        assert_eq!(k2.peers, vec![([0.0, 0.5], true), ([0.0, -1.0], false)]);
+        assert_eq!(b.clone().bounded(&Bound::EVERYTHING), b);
+    }
 
     #[test]
     fn builder_makes_relative_positions() {

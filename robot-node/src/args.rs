@@ -58,8 +58,15 @@ pub struct Params {
     /// Staleness of machine and storage data (latched topics); <= 0 disables it.
     /// Default: `stale_timeout_s`.
     pub static_stale_timeout_s: f64,
-    /// Accepted positions: |x|,|y| <= 1.15 + room_margin.
+    /// Side of the room, m: the planner's walls, and accepted positions are |x|,|y| <=
+    /// room_size / 2 + room_margin. The contract's 2.3 m; a grown floor's (docs/adr/0037)
+    /// from `tending fleet`.
+    pub room_size: f64,
+    /// Accepted positions: |x|,|y| <= room_size / 2 + room_margin.
     pub room_margin: f64,
+    /// What the robot observes of what it receives (`nearest_machines`, `nearest_storages`,
+    /// `nearest_peers`; 0 or absent: everything, the paper's): the simulator's rule.
+    pub observation: obs::Bound,
     /// Period of the counters log line.
     pub stats_period_s: f64,
     /// Period of topic discovery scans.
@@ -133,7 +140,9 @@ impl Default for Params {
             prep_steps: 20,
             stale_timeout_s: 1.0,
             static_stale_timeout_s: 1.0,
+            room_size: 2.0 * msgs::validate::ROOM_HALF_EXTENT,
             room_margin: msgs::validate::DEFAULT_MARGIN,
+            observation: obs::Bound::EVERYTHING,
             stats_period_s: 10.0,
             discovery_period_s: 0.5,
             robot_radius: 0.08,
@@ -166,7 +175,8 @@ parameters: policy (path), controller (greedy|greedy-orca|matching-orca|policy),
             orca_* not given), control_rate_hz (10),
             use_sim_time (false), reach (= robot_radius),
             k_speed (0.5), prep_steps (20), stale_timeout_s (1.0), static_stale_timeout_s (= stale_timeout_s, <=0 off),
-            room_margin (0.25), stats_period_s (10), discovery_period_s (0.5),
+            room_size (2.3 m), room_margin (0.25), nearest_machines / nearest_storages /
+            nearest_peers (0: everything), stats_period_s (10), discovery_period_s (0.5),
             robot_radius (0.08), machine_half_x/_y (0.12), storage_half_x (0.15), storage_half_y (0.08),
             lockstep (false; implies use_sim_time), lockstep_wait_s (0.5), lockstep_resend_s (0.5; 0 never),
             act_on_state (true: real time acts when a state is in), state_wait_s (0.03),
@@ -271,6 +281,10 @@ fn apply_param(p: &mut Params, name: &str, v: &ParamValue) -> Result<bool, ArgEr
             p.static_stale_timeout_s = x;
         }
         "room_margin" => p.room_margin = non_negative(name, v)?,
+        "room_size" => p.room_size = positive(name, v)?,
+        "nearest_machines" => p.observation.nearest_machines = nearest(name, v)?,
+        "nearest_storages" => p.observation.nearest_storages = nearest(name, v)?,
+        "nearest_peers" => p.observation.nearest_peers = nearest(name, v)?,
         "stats_period_s" => p.stats_period_s = positive(name, v)?,
         "robot_radius" => p.robot_radius = positive(name, v)?,
         "machine_half_x" => p.machine_half[0] = positive(name, v)?,
@@ -290,6 +304,19 @@ fn apply_param(p: &mut Params, name: &str, v: &ParamValue) -> Result<bool, ArgEr
         _ => return Ok(false),
     }
     Ok(true)
+}
+
+/// An observation bound: a whole number of entities, 0 (everything) to 100,000.
+fn nearest(name: &str, v: &ParamValue) -> Result<Option<usize>, ArgError> {
+    let x = num(name, v)?;
+    if x.fract() == 0.0 && (0.0..=100_000.0).contains(&x) {
+        Ok((x > 0.0).then_some(x as usize))
+    } else {
+        Err(param_error(
+            name,
+            format!("must be a whole number from 0 (everything) to 100000, got {x}"),
+        ))
+    }
 }
 
 /// A whole number of control periods, 1 to 100,000.

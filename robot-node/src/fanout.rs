@@ -118,6 +118,7 @@ mod tests {
                 stale_timeout_s: 1.0,
                 static_stale_timeout_s: 1.0,
                 room: RoomBounds::default(),
+                bound: obs::Bound::EVERYTHING,
             },
         );
         let gp = crate::controller::tests::params(0.5);

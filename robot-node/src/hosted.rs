@@ -70,9 +70,10 @@ pub(crate) fn host(
         stale_timeout_s: p.stale_timeout_s,
         static_stale_timeout_s: p.static_stale_timeout_s,
         room: msgs::RoomBounds {
-            half_extent: msgs::validate::ROOM_HALF_EXTENT,
+            half_extent: p.room_size / 2.0,
             margin: p.room_margin,
         },
+        bound: p.observation,
     };
     let mut hosted: Vec<Hosted> = Vec::with_capacity(robots.len());
     let placeholder = Instant::now(); // set when the loop starts

@@ -93,7 +93,7 @@ fn policy_controller(p: &Params, fleet: FleetParams) -> anyhow::Result<(Box<dyn 
 }
 
 /// What a robot knows about its fleet: sizes, speed, control period, machine timing, the
-/// wire contract's room, its reach and the default contact distance. The planner's
+/// room (`room_size`, the contract's 2.3 m unless a grown floor says otherwise), its reach and the default contact distance. The planner's
 /// parameter sets (greedy, ORCA, shield) come from it.
 pub fn fleet_params(p: &Params) -> FleetParams {
     FleetParams {
@@ -103,7 +103,7 @@ pub fn fleet_params(p: &Params) -> FleetParams {
         k_speed: p.k_speed as f32,
         dt: (1.0 / p.control_rate_hz) as f32,
         prep_steps: p.prep_steps,
-        room_size: 2.0 * msgs::validate::ROOM_HALF_EXTENT as f32,
+        room_size: p.room_size as f32,
         reach: p.reach.unwrap_or(p.robot_radius) as f32,
         collision_distance: plan::fleet::DEFAULT_COLLISION_DISTANCE,
     }

@@ -250,6 +250,9 @@ pub struct WorldModelConfig {
     /// Machines and storages; <= 0 = never stale.
     pub static_stale_timeout_s: f64,
     pub room: RoomBounds,
+    /// What the robot observes of what it receives: everything, or the k nearest of each
+    /// group by the simulator's rule (`obs::nearest`, docs/adr/0037).
+    pub bound: obs::Bound,
 }
 
 /// Latest data about self, machines, storages and peers.
@@ -490,7 +493,8 @@ impl World {
             machines,
             storages,
             peers,
-        })
+        }
+        .bounded(&self.cfg.bound))
     }
 
     /// An entity was discovered (subscribed): lockstep expects its data from the first
@@ -606,7 +610,8 @@ impl World {
                 .values()
                 .filter_map(|r| Some((f(at(&r.pose)?.value), flag_at(&r.flag)?.value)))
                 .collect(),
-        })
+        }
+        .bounded(&self.cfg.bound))
     }
 
     /// Fresh peer poses at `now`, and how many carry another stamp than `stamp`.

@@ -33,13 +33,32 @@ pub struct ScenarioConfig {
     pub task: TaskConfig,
     pub sizes: SizeConfig,
     pub rewards: RewardConfig,
+    /// What each robot observes: everything (the paper's) or the k nearest of each group.
+    pub observation: obs::Bound,
+}
+
+/// Which floor a setup is laid out on (docs/adr/0037).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Floor {
+    /// The paper's: one room of `world.room_size` for every setup; bodies shrink when the
+    /// setup would cover more than `sizes.occupancy` of it (section IV-D).
+    #[default]
+    Paper,
+    /// The floor grows with the fleet: the room's side is chosen so that the setup's bodies,
+    /// at their unscaled size, cover the same fraction of the floor as 6.4_2's do in the
+    /// paper's room of `world.room_size`. Bodies never shrink; 6.4_2 gets the paper's room.
+    Grown,
 }
 
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct WorldConfig {
-    /// Side of the square room, metres; origin at its centre.
+    /// Side of the square room, metres; origin at its centre. On a grown floor
+    /// ([`Floor::Grown`]) the paper's room the growth is measured from.
     pub room_size: f32,
+    /// The paper's fixed room, or a floor that grows with the fleet.
+    pub floor: Floor,
     /// Control period, seconds.
     pub dt: f32,
     /// Physics substeps per control step (VMAS `substeps`).
@@ -119,6 +138,7 @@ impl Default for WorldConfig {
     fn default() -> Self {
         Self {
             room_size: 2.3,
+            floor: Floor::Paper,
             dt: 0.1,
             substeps: 1,
             episode_steps: 200,
@@ -210,6 +230,16 @@ impl ScenarioConfig {
         toml::to_string_pretty(&v).expect("config serializes")
     }
 
+    /// This config as `setup` runs it: on a grown floor, the paper's floor with the room
+    /// [`crate::layout::room_for`] gives the setup (so everything that reads
+    /// `world.room_size` from an environment's config reads the room it runs in).
+    pub fn resolved_for(&self, setup: crate::Setup) -> Self {
+        let mut c = self.clone();
+        c.world.room_size = crate::layout::room_for(setup, self);
+        c.world.floor = Floor::Paper;
+        c
+    }
+
     /// Refuse values that would make the physics meaningless or blow up.
     pub fn validate(&self) -> Result<(), SimError> {
         fn pos(field: &str, v: f32) -> Result<(), SimError> {
@@ -234,6 +264,18 @@ impl ScenarioConfig {
         }
         let w = &self.world;
         pos("world.room_size", w.room_size)?;
+        let o = &self.observation;
+        for (field, k) in [
+            ("observation.nearest_machines", o.nearest_machines),
+            ("observation.nearest_storages", o.nearest_storages),
+        ] {
+            if k == Some(0) {
+                return Err(SimError::BadConfig {
+                    field: field.into(),
+                    reason: "must be >= 1 (a robot must see a machine and a storage)".into(),
+                });
+            }
+        }
         pos("world.dt", w.dt)?;
         if w.substeps == 0 {
             return Err(SimError::BadConfig {

@@ -97,6 +97,8 @@ impl Env {
                 reason: "a setup needs at least one robot, one machine and one storage".into(),
             });
         }
+        // A grown floor becomes the paper's floor with the setup's room (`resolved_for`).
+        let cfg = cfg.resolved_for(setup);
         let sizes = sizes_for(setup, &cfg);
         let interaction = 2.0 * sizes.robot_radius + cfg.task.collision_distance.max(0.0);
         let grid = Grid::new(cfg.world.room_size, interaction);

@@ -12,19 +12,45 @@
 //! everything. A layout that cannot be placed in bounded tries is refused as not fitting.
 
 use crate::entities::{Sizes, StaticBox};
-use crate::{ScenarioConfig, Setup, SimError};
+use crate::{Floor, ScenarioConfig, Setup, SimError};
 use rand::Rng;
 
 const TRIES_PER_BODY: usize = 4000;
 const LAYOUT_ATTEMPTS: usize = 20;
 
+/// The unscaled footprint F of `setup`'s bodies, m^2 (module docs).
+pub fn footprint(setup: Setup, cfg: &ScenarioConfig) -> f32 {
+    let s = &cfg.sizes;
+    let g = s.box_gap_diameters * 2.0 * s.robot_radius;
+    setup.robots as f32 * std::f32::consts::PI * s.robot_radius * s.robot_radius
+        + setup.machines as f32 * (s.machine_size[0] + g) * (s.machine_size[1] + g)
+        + setup.storages as f32 * (s.storage_size[0] + g) * (s.storage_size[1] + g)
+}
+
+/// The setup whose density a grown floor keeps: the paper's first and training setup.
+pub const GROWN_REFERENCE: Setup = Setup::new(6, 4, 2);
+
+/// Side of the room `setup` is laid out in, metres: `world.room_size` on the paper's floor;
+/// on a grown floor, the side at which the setup's unscaled footprint covers the fraction
+/// of the floor that 6.4_2's covers in a room of `world.room_size` (never smaller than
+/// that room). For the default sizes: 100.66_33 9.37 m, 300.200_100 16.2 m, 1000.666_333
+/// 29.6 m.
+pub fn room_for(setup: Setup, cfg: &ScenarioConfig) -> f32 {
+    let room = cfg.world.room_size;
+    match cfg.world.floor {
+        Floor::Paper => room,
+        Floor::Grown => {
+            let density = footprint(GROWN_REFERENCE, cfg) / (room * room);
+            (footprint(setup, cfg) / density).sqrt().max(room)
+        }
+    }
+}
+
 pub fn sizes_for(setup: Setup, cfg: &ScenarioConfig) -> Sizes {
     let s = &cfg.sizes;
-    let room_area = cfg.world.room_size * cfg.world.room_size;
-    let g = s.box_gap_diameters * 2.0 * s.robot_radius;
-    let footprint = setup.robots as f32 * std::f32::consts::PI * s.robot_radius * s.robot_radius
-        + setup.machines as f32 * (s.machine_size[0] + g) * (s.machine_size[1] + g)
-        + setup.storages as f32 * (s.storage_size[0] + g) * (s.storage_size[1] + g);
+    let room = room_for(setup, cfg);
+    let room_area = room * room;
+    let footprint = footprint(setup, cfg);
     let scale = if footprint > s.occupancy * room_area {
         (s.occupancy * room_area / footprint).sqrt()
     } else {

@@ -31,7 +31,7 @@ mod vec_env;
 pub use action::{action_to_velocity, N_ACTIONS};
 pub use bound::{parts_bound, PartsBound};
 pub use config::{
-    PhysicsConfig, RewardConfig, ScenarioConfig, SizeConfig, TaskConfig, WorldConfig,
+    Floor, PhysicsConfig, RewardConfig, ScenarioConfig, SizeConfig, TaskConfig, WorldConfig,
 };
 pub use entities::{MachineId, RobotId, Sizes, StorageId};
 pub use env::{Env, MachineView, RobotEvents, RobotView, StorageView};

@@ -71,10 +71,9 @@ pub struct FleetArgs {
     /// (default 2, or 4 with --secure: handshakes come first); 0 skips the check.
     #[arg(long)]
     pub domain_check: Option<f64>,
-    /// Scenario config (TOML) for the bridge; default: the simulator's defaults.
-    /// (`--config`, its old name, still works.)
-    #[arg(long, alias = "config")]
-    pub scenario: Option<PathBuf>,
+    /// The scenario (TOML file, floor, observation bound) for the bridge and every robot.
+    #[command(flatten)]
+    pub scenario: crate::scenario_args::ScenarioArgs,
     /// Safety margins (TOML, plan::margins, e.g. configs/margins/*.toml): the ORCA
     /// filter's go to every robot_node (orca_clearance, orca_rest_clearance,
     /// orca_obstacle_horizon in the fleet's parameters file); default: the deployed ones.

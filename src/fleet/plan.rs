@@ -104,6 +104,8 @@ pub(super) struct Plan {
     pub(super) setup: sim::Setup,
     pub(super) cfg: sim::ScenarioConfig,
     pub(super) sizes: sim::Sizes,
+    /// The room the setup runs in (the paper's, or a grown floor's, docs/adr/0037).
+    pub(super) room_size: f32,
     pub(super) domain: u16,
     pub(super) lockstep: bool,
     pub(super) log_dir: PathBuf,
@@ -152,13 +154,12 @@ impl Plan {
                 bail!("policy checkpoint {} does not exist", p.display());
             }
         }
-        let cfg = match &a.scenario {
-            Some(p) => sim::ScenarioConfig::load(p).context("--scenario")?,
-            None => sim::ScenarioConfig::default(),
-        };
-        let sizes = *sim::Env::new(cfg.clone(), setup, a.seed)?.sizes();
+        let cfg = a.scenario.load()?;
+        // The setup's room and body sizes, from the counts (no environment needed).
+        let sizes = sim::layout::sizes_for(setup, &cfg);
+        let room_size = sim::layout::room_for(setup, &cfg);
         let margins = match &a.margins {
-            Some(p) => plan::Margins::load(p).context("--margins")?,
+            Some(p) => plan::Margins::load(p).map_err(|e| anyhow!("--margins: {e}"))?,
             None => plan::Margins::default(),
         };
         // robot_node runs greedy-ORCA with its built-in margins: refuse rather than ignore
@@ -209,6 +210,7 @@ impl Plan {
             a,
             setup,
             cfg,
+            room_size,
             sizes,
             domain,
             log_dir,
@@ -303,7 +305,13 @@ impl Plan {
             .set("stale_timeout_s", a.stale_timeout)
             .set("cmd_vel_timeout_s", self.cmd_vel_timeout)
             .set("stdin_commands", true);
-        if let Some(c) = &a.scenario {
+        if a.scenario.floor.is_some() || a.scenario.nearest.is_some() {
+            // the flags changed the file's scenario: the bridge reads the one in effect
+            let f = self.log_dir.join("scenario.toml");
+            std::fs::write(&f, self.cfg.to_toml())
+                .with_context(|| format!("writing {}", f.display()))?;
+            b.set("config", f.display().to_string());
+        } else if let Some(c) = &a.scenario.scenario {
             b.set("config", c.display().to_string());
         }
         if let Some(r) = &a.record {
@@ -332,12 +340,23 @@ impl Plan {
             .set_f32("machine_half_y", s.machine_half[1])
             .set_f32("storage_half_x", s.storage_half[0])
             .set_f32("storage_half_y", s.storage_half[1])
+            .set_f32("room_size", self.room_size)
             .set("stale_timeout_s", a.stale_timeout)
             .set_f32("orca_clearance", self.margins.clearance)
             .set_f32("orca_rest_clearance", self.margins.rest_clearance)
             .set_f32("orca_obstacle_horizon", self.margins.obstacle_horizon);
         if self.lockstep {
             r.set("lockstep", true);
+        }
+        let o = self.cfg.observation;
+        for (name, k) in [
+            ("nearest_machines", o.nearest_machines),
+            ("nearest_storages", o.nearest_storages),
+            ("nearest_peers", o.nearest_peers),
+        ] {
+            if let Some(k) = k {
+                r.set(name, k as u64);
+            }
         }
         if let Some(p) = &a.policy {
             r.set("policy", p.display().to_string());

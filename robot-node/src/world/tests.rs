@@ -10,6 +10,7 @@ fn cfg() -> WorldModelConfig {
         stale_timeout_s: 1.0,
         static_stale_timeout_s: 2.0,
         room: RoomBounds::default(),
+        bound: obs::Bound::EVERYTHING,
     }
 }
 fn pose(x: f64, y: f64) -> PoseStamped {
