@@ -1339,7 +1339,9 @@ impl DomainParticipantInner {
       )
       .collect();
 
-    // Adding readers. Capacities match the previous mio-extras channels.
+    // Adding readers. Capacities match the previous mio-extras channels. Adding
+    // a reader or a writer waits for a free slot (`send`), so the capacity only
+    // bounds how far the application may run ahead of the event loop.
     let (sender_add_reader, receiver_add_reader) =
       wake_channel::<ReaderIngredients>(100, &dp_waker);
     // Removals are unbounded: a dropped DataReader/DataWriter must never block

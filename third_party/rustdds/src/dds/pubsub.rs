@@ -1331,10 +1331,16 @@ impl InnerSubscriber {
     )?;
 
     // Send reader ingredients to DP event loop, where the actual reader will be
-    // constructed
+    // constructed. The send waits for a free slot, as the writer path does. With
+    // `try_send`, an application creating readers faster than the event loop
+    // drains them (a busy or briefly descheduled event loop, 100 readers in a
+    // few milliseconds) got `Poisoned` for every reader past the channel's
+    // capacity, although nothing was wrong. No lock is held here (the Discovery
+    // DB guard above is scoped), so waiting cannot deadlock against the event
+    // loop; the send fails only if the event loop has ended.
     self
       .sender_add_reader
-      .try_send(new_reader)
+      .send(new_reader)
       .or_else(|e| create_error_poisoned!("Cannot add DataReader. Error: {}", e))?;
 
     // Return the DataReader to user
