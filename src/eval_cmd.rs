@@ -107,6 +107,14 @@ pub fn run(a: EvalArgs) -> Result<()> {
     };
     let mode = crate::method::mode(&ctrl);
     let cfg = a.scenario.load()?;
+    // A floor or observation other than the paper's is part of the method's name, so rows
+    // of a sweep stay apart in records and plots (the paper's rows keep their labels).
+    let scope = scope_label(&cfg);
+    let label = if scope.is_empty() {
+        label
+    } else {
+        format!("{label} [{scope}]")
+    };
     let (setups, seeds) = a.runs.parse()?;
     let episodes = a.runs.episodes;
 
@@ -154,6 +162,19 @@ pub fn run(a: EvalArgs) -> Result<()> {
         eprintln!("wrote {}/results.md and results.csv", out.display());
     }
     Ok(())
+}
+
+/// "grown floor, nearest 8/8/8" for what differs from the paper's floor and observation;
+/// empty for the paper's.
+pub fn scope_label(cfg: &sim::ScenarioConfig) -> String {
+    let mut parts = vec![];
+    if cfg.world.floor == sim::Floor::Grown {
+        parts.push("grown floor".to_string());
+    }
+    if cfg.observation.is_bounded() {
+        parts.push(cfg.observation.label());
+    }
+    parts.join(", ")
 }
 
 #[cfg(test)]

@@ -12,10 +12,12 @@
 
 mod lockstep_common;
 
-use lockstep_common::{offline_episode, policy_with_states, pretrained, LockstepRun, Offline};
+use lockstep_common::{
+    offline_episode, offline_episode_in, policy_with_states, pretrained, LockstepRun, Offline,
+};
 
 use plan::pilot::{self, FilterMargins, MatchingOrca, Outputs, Pilot, Row, Safety};
-use sim::{Env, Setup};
+use sim::{Env, ScenarioConfig, Setup};
 
 fn offline_greedy_orca(setup: Setup, seed: u64, steps: u32) -> Offline {
     let init = |env: &Env| {
@@ -85,21 +87,32 @@ fn offline_targets(setup: Setup, seed: u64, steps: u32, path: &std::path::Path) 
 /// matching-ORCA (`plan::MatchingOrca`, robot_node's `controller:=matching-orca`): every
 /// robot always asks for the menu's "matched" entry, through the deployed ORCA filter.
 fn offline_matching_orca(setup: Setup, seed: u64, steps: u32) -> Offline {
+    offline_matching_orca_in(&ScenarioConfig::default(), setup, seed, steps)
+}
+
+fn offline_matching_orca_in(cfg: &ScenarioConfig, setup: Setup, seed: u64, steps: u32) -> Offline {
     let init = |env: &Env| {
         let fleet = learn::baselines::fleet_params(env.sizes(), env.config());
         let one = MatchingOrca::new(&fleet, FilterMargins::DEPLOYED).unwrap();
         (vec![one; env.n_robots()], Vec::new())
     };
-    offline_episode(setup, seed, steps, init, |(robots, vels), batch, env| {
-        vels.clear();
-        vels.extend(
-            robots
-                .iter_mut()
-                .enumerate()
-                .map(|(r, m)| m.velocity(Row::of(batch, r))),
-        );
-        env.step_velocities(vels).unwrap();
-    })
+    offline_episode_in(
+        cfg,
+        setup,
+        seed,
+        steps,
+        init,
+        |(robots, vels), batch, env| {
+            vels.clear();
+            vels.extend(
+                robots
+                    .iter_mut()
+                    .enumerate()
+                    .map(|(r, m)| m.velocity(Row::of(batch, r))),
+            );
+            env.step_velocities(vels).unwrap();
+        },
+    )
 }
 
 /// The bundled 5-move policy, a seed and what robot_node is told: the three ways of
@@ -177,4 +190,38 @@ fn matching_orca_fleet_in_lockstep_reproduces_the_offline_episode() {
         ..LockstepRun::new(setup, seed, steps, test_domains::domain(4))
     }
     .assert_reproduces("matching-orca", &off);
+}
+
+/// On a grown floor (docs/adr/0037) with every robot observing only its 3 nearest
+/// machines, storages and peers, robot_node applies the simulator's selection rule to what
+/// it receives, in the room the bridge runs: the fleet reproduces the offline episode.
+#[test]
+fn a_bounded_observation_on_a_grown_floor_reproduces_the_offline_episode() {
+    let setup = Setup::new(12, 8, 4);
+    let mut cfg = ScenarioConfig::default();
+    cfg.world.floor = sim::Floor::Grown;
+    cfg.observation = obs::Bound::nearest(3);
+    let (seed, steps) = (2, 200);
+    let off = offline_matching_orca_in(&cfg, setup, seed, steps);
+    let unbounded = offline_matching_orca_in(
+        &ScenarioConfig {
+            observation: obs::Bound::EVERYTHING,
+            ..cfg.clone()
+        },
+        setup,
+        seed,
+        steps,
+    );
+    assert!(off.delivered > 0, "choose a seed where it delivers");
+    assert_ne!(
+        (off.delivered, off.collisions),
+        (unbounded.delivered, unbounded.collisions),
+        "the bound changes nothing on this seed: the test would not see it ignored"
+    );
+    LockstepRun {
+        robot_params: &["controller:=matching-orca"],
+        scenario: Some(&cfg),
+        ..LockstepRun::new(setup, seed, steps, test_domains::domain(5))
+    }
+    .assert_reproduces("matching-orca, grown floor, 3 nearest", &off);
 }

@@ -55,9 +55,21 @@ pub fn offline_episode<C>(
     seed: u64,
     steps: u32,
     init: impl FnOnce(&Env) -> C,
+    step: impl FnMut(&mut C, &obs::ObsBatch, &mut Env),
+) -> Offline {
+    offline_episode_in(&ScenarioConfig::default(), setup, seed, steps, init, step)
+}
+
+/// [`offline_episode`] in scenario `cfg`.
+pub fn offline_episode_in<C>(
+    cfg: &ScenarioConfig,
+    setup: Setup,
+    seed: u64,
+    steps: u32,
+    init: impl FnOnce(&Env) -> C,
     mut step: impl FnMut(&mut C, &obs::ObsBatch, &mut Env),
 ) -> Offline {
-    let mut env = Env::new(ScenarioConfig::default(), setup, seed).unwrap();
+    let mut env = Env::new(cfg.clone(), setup, seed).unwrap();
     let mut ctrl = init(&env);
     let mut batch = obs::ObsBatch::default();
     for _ in 0..steps {
@@ -155,6 +167,9 @@ pub struct LockstepRun<'a> {
     /// DDS Security from this keystore (enclaves `/tending/robot_<i>` and
     /// `/tending/sim_bridge`, as `tending security create` makes them).
     pub keystore: Option<&'a std::path::Path>,
+    /// Scenario other than the default: the bridge reads it, and every robot_node gets its
+    /// room (`room_size`) and observation bound (`nearest_*`).
+    pub scenario: Option<&'a ScenarioConfig>,
 }
 
 impl<'a> LockstepRun<'a> {
@@ -168,6 +183,7 @@ impl<'a> LockstepRun<'a> {
             robot_params: &[],
             bridge_params: &[],
             keystore: None,
+            scenario: None,
         }
     }
 
@@ -188,8 +204,11 @@ impl<'a> LockstepRun<'a> {
             robot_params: extra,
             bridge_params: bridge_extra,
             keystore,
+            scenario,
         } = *self;
-        let env0 = Env::new(ScenarioConfig::default(), setup, seed).unwrap();
+        let default_cfg = ScenarioConfig::default();
+        let cfg = scenario.unwrap_or(&default_cfg);
+        let env0 = Env::new(cfg.clone(), setup, seed).unwrap();
         let s = env0.sizes();
         let f = |x: f32| format!("{:?}", x as f64);
         let mut kids = Kill(Vec::new());
@@ -210,11 +229,25 @@ impl<'a> LockstepRun<'a> {
                 .args(["-p", &format!("storage_half_x:={}", f(s.storage_half[0]))])
                 .args(["-p", &format!("storage_half_y:={}", f(s.storage_half[1]))])
                 .args(["-p", "stale_timeout_s:=5.0"])
+                .args([
+                    "-p",
+                    &format!("room_size:={}", f(env0.config().world.room_size)),
+                ])
                 .args(["--disable-rosout-logs"])
                 .stdout(Stdio::null())
                 .stderr(std::fs::File::create(log_of(i)).unwrap());
             if let Some(p) = policy {
                 cmd.args(["-p", &format!("policy:={}", p.display())]);
+            }
+            let o = cfg.observation;
+            for (name, k) in [
+                ("nearest_machines", o.nearest_machines),
+                ("nearest_storages", o.nearest_storages),
+                ("nearest_peers", o.nearest_peers),
+            ] {
+                if let Some(k) = k {
+                    cmd.args(["-p", &format!("{name}:={k}")]);
+                }
             }
             for e in extra {
                 cmd.args(["-p", e]);
@@ -240,6 +273,11 @@ impl<'a> LockstepRun<'a> {
             // the first answers are waited for longer, as `tending fleet --secure` does.
             bridge.args(["-p", "settle_s:=8.0", "-p", "startup_grace_s:=30.0"]);
             secure(&mut bridge, ks, "/tending/sim_bridge");
+        }
+        if scenario.is_some() {
+            let file = logs.join("scenario.toml");
+            std::fs::write(&file, cfg.to_toml()).unwrap();
+            bridge.args(["-p", &format!("config:={}", file.display())]);
         }
         for e in bridge_extra {
             bridge.args(["-p", e]);

@@ -71,9 +71,9 @@ impl Env {
 
     /// [`Self::observe_into`] with the k nearest entities of each bounded group, listed in
     /// the group's own order (so k >= the group's size gives the unbounded observation).
-    /// The selection scans the group once per robot (O(N) with a small constant: a few
-    /// microseconds at 1,000 robots, docs/bench/scale.md), the same rule robot_node applies
-    /// to what it receives.
+    /// Each group is put in a grid ([`obs::nearest::Grid`]) once per call and each robot's
+    /// query visits only the cells around it, so a robot's cost is bounded by its
+    /// neighbourhood, not the floor; the rule is robot_node's (`obs::nearest`).
     fn observe_nearest(
         &self,
         own: &mut [f32],
@@ -86,16 +86,21 @@ impl Env {
         let n = self.r_id.len();
         let m_centres: Vec<[f32; 2]> = self.m_box.iter().map(|b| b.centre).collect();
         let s_centres: Vec<[f32; 2]> = self.s_box.iter().map(|b| b.centre).collect();
-        let mut pick = obs::nearest::Nearest::default();
+        let mut grids = [
+            obs::nearest::Grid::default(),
+            obs::nearest::Grid::default(),
+            obs::nearest::Grid::default(),
+        ];
+        grids[0].build(&m_centres);
+        grids[1].build(&s_centres);
+        grids[2].build(&self.r_pos);
+        let mut pick = Vec::new();
         for i in 0..n {
             let p = self.r_pos[i];
             own[i * 3..i * 3 + 3].copy_from_slice(&[p[0], p[1], obs::flag(self.r_part[i])]);
             let mo = &mut machines[i * c.machines * 3..(i + 1) * c.machines * 3];
-            for (slot, &j) in pick
-                .select(p, &m_centres, o.nearest_machines, None)
-                .iter()
-                .enumerate()
-            {
+            grids[0].select(p, o.nearest_machines, None, &mut pick);
+            for (slot, &j) in pick.iter().enumerate() {
                 let q = m_centres[j];
                 mo[slot * 3..slot * 3 + 3].copy_from_slice(&[
                     q[0] - p[0],
@@ -104,20 +109,14 @@ impl Env {
                 ]);
             }
             let so = &mut storages[i * c.storages * 2..(i + 1) * c.storages * 2];
-            for (slot, &j) in pick
-                .select(p, &s_centres, o.nearest_storages, None)
-                .iter()
-                .enumerate()
-            {
+            grids[1].select(p, o.nearest_storages, None, &mut pick);
+            for (slot, &j) in pick.iter().enumerate() {
                 let q = s_centres[j];
                 so[slot * 2..slot * 2 + 2].copy_from_slice(&[q[0] - p[0], q[1] - p[1]]);
             }
             let po = &mut peers[i * c.peers * 3..(i + 1) * c.peers * 3];
-            for (slot, &j) in pick
-                .select(p, &self.r_pos, o.nearest_peers, Some(i))
-                .iter()
-                .enumerate()
-            {
+            grids[2].select(p, o.nearest_peers, Some(i), &mut pick);
+            for (slot, &j) in pick.iter().enumerate() {
                 let q = self.r_pos[j];
                 po[slot * 3..slot * 3 + 3].copy_from_slice(&[
                     q[0] - p[0],
