@@ -3,7 +3,7 @@
 The same observations (random ones at several entity counts, empty groups included, and a
 trajectory of the simulator) go through both, several steps with a GRU state per robot
 and an episode restart in the middle; the logits must agree within TOL (absolute). The
-Rust side is policy/examples/logits.rs (built here if absent), by both of its routes: the
+Rust side is policy/examples/logits.rs (built here with cargo), by both of its routes: the
 deployment one (`Policy::logits`, one robot at a time, as robot_node) and the trainer's
 (`Actor::forward_seq` over all steps and robots at once). Checkpoints: the bundled ones,
 fresh ones written by Rust and loaded by torch, fresh ones written by torch and loaded by
@@ -47,18 +47,20 @@ MEASURED = []  # (what, max |diff|, max |logit|), printed at the end of the modu
 
 
 def logits_bin():
-    """policy/examples/logits.rs, built once (release) if it is not there yet."""
+    """policy/examples/logits.rs: built (release; a no-op when up to date) where cargo is
+    on PATH, else the one beside the binaries of TENDING_BIN_DIR (or target/release)."""
+    cargo = shutil.which("cargo")
+    if cargo is not None:
+        subprocess.run(
+            [cargo, "build", "--release", "--locked", "-q", "-p", "policy", "--example", "logits"],
+            cwd=ROOT, check=True, timeout=1800,
+        )
+        target = Path(os.environ.get("CARGO_TARGET_DIR") or ROOT / "target")
+        return str((ROOT / target).resolve() / "release" / "examples" / "logits")
     d = os.environ.get("TENDING_BIN_DIR") or str(ROOT / "target" / "release")
     b = os.path.join(d, "examples", "logits")
     if not os.path.isfile(b):
-        cargo = shutil.which("cargo")
-        if cargo is None:
-            pytest.fail(f"{b} is not built and cargo is not on PATH (cargo build --release -p policy --example logits)")
-        subprocess.run(
-            [cargo, "build", "--release", "--locked", "-p", "policy", "--example", "logits"],
-            cwd=ROOT, check=True, timeout=1800,
-        )
-        b = str(ROOT / "target" / "release" / "examples" / "logits")
+        pytest.fail(f"{b} is not built and cargo is not on PATH (cargo build --release -p policy --example logits)")
     return b
 
 
