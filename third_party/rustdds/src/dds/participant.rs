@@ -302,14 +302,17 @@ impl DomainParticipantBuilder {
     // * Participant commands Discovery to assert liveness, i.e. send liveness
     // message to remote participants.
     // * Discovery commands Discovery (thread) to terminate on exit.
-    // Capacity 1024 absorbs a few hundred endpoints created while Discovery is
-    // busy, including while it blocks on the 32-slot notification channel back
-    // to the event loop. Each create_datareader / create_datawriter enqueues
-    // AddTopic plus AddLocalReader or AddLocalWriter, and try_send drops a
-    // command that does not fit, so Discovery never announces that endpoint.
-    // A still larger burst is dropped.
+    // Unbounded. Each create_datareader / create_datawriter enqueues AddTopic
+    // (from the application) plus AddLocalReader or AddLocalWriter (from the
+    // event loop), and a dropped AddLocal* leaves that endpoint unannounced:
+    // no remote ever matches it. With 1024 slots and try_send, a process
+    // creating a few thousand endpoints while Discovery was busy (a 500-robot
+    // fleet's nodes, 1,100-2,000 readers each) lost hundreds of them. The event
+    // loop must not wait for a slot instead: Discovery itself blocks on its
+    // 32-slot notification channel to the event loop. A command is a GUID or a
+    // topic name, and their number is bounded by the endpoints created.
     let (discovery_command_sender, discovery_command_receiver) =
-      wake_channel::<DiscoveryCommand>(1024, &discovery_waker);
+      wake_channel_unbounded::<DiscoveryCommand>(&discovery_waker);
 
     // Built-in discovery readers report new samples here. The token says which
     // reader. User readers do not use this queue.
@@ -954,7 +957,7 @@ impl RTPSEntity for DomainParticipantWeak {
 pub(crate) struct DomainParticipantDisc {
   dpi: DomainParticipantInner,
   // Discovery control
-  discovery_command_sender: WakeSender<DiscoveryCommand>,
+  discovery_command_sender: WakeUnboundedSender<DiscoveryCommand>,
   discovery_join_handle: std::sync::mpsc::Receiver<JoinHandle<()>>,
   // This allows deterministic generation of EntityIds for DataReader, DataWriter, etc.
   entity_id_generator: atomic::AtomicU32,
@@ -968,7 +971,7 @@ impl DomainParticipantDisc {
     qos_policies: QosPolicies,
     discovery_join_handle: std::sync::mpsc::Receiver<JoinHandle<()>>,
     discovery_update_notification_receiver: WakeReceiver<DiscoveryNotificationType>,
-    discovery_command_sender: WakeSender<DiscoveryCommand>,
+    discovery_command_sender: WakeUnboundedSender<DiscoveryCommand>,
     spdp_liveness_sender: WakeSender<GuidPrefix>,
     status_sender: StatusChannelSender<DomainParticipantStatusEvent>,
     status_receiver: StatusChannelReceiver<DomainParticipantStatusEvent>,
@@ -1227,7 +1230,7 @@ impl DomainParticipantInner {
     participant_guid: GUID,
     _qos_policies: QosPolicies,
     discovery_update_notification_receiver: WakeReceiver<DiscoveryNotificationType>,
-    discovery_command_sender: WakeSender<DiscoveryCommand>,
+    discovery_command_sender: WakeUnboundedSender<DiscoveryCommand>,
     spdp_liveness_sender: WakeSender<GuidPrefix>,
     status_sender: StatusChannelSender<DomainParticipantStatusEvent>,
     status_receiver: StatusChannelReceiver<DomainParticipantStatusEvent>,
@@ -1497,7 +1500,7 @@ impl DomainParticipantInner {
     &self,
     domain_participant: &DomainParticipantWeak,
     qos: &QosPolicies,
-    discovery_command: WakeSender<DiscoveryCommand>,
+    discovery_command: WakeUnboundedSender<DiscoveryCommand>,
   ) -> CreateResult<Publisher> {
     Ok(Publisher::new(
       domain_participant.clone(),
@@ -1516,7 +1519,7 @@ impl DomainParticipantInner {
     &self,
     domain_participant: &DomainParticipantWeak,
     qos: &QosPolicies,
-    discovery_command: WakeSender<DiscoveryCommand>,
+    discovery_command: WakeUnboundedSender<DiscoveryCommand>,
   ) -> CreateResult<Subscriber> {
     Ok(Subscriber::new(
       domain_participant.clone(),

@@ -105,7 +105,7 @@ impl Publisher {
     default_dw_qos: QosPolicies,
     add_writer_sender: WakeSender<WriterIngredients>,
     remove_writer_sender: WakeUnboundedSender<GUID>,
-    discovery_command: WakeSender<DiscoveryCommand>,
+    discovery_command: WakeUnboundedSender<DiscoveryCommand>,
     security_plugins_handle: Option<SecurityPluginsHandle>,
     writer_ready: ReadySender<EntityId>,
   ) -> Self {
@@ -429,7 +429,7 @@ struct InnerPublisher {
   default_datawriter_qos: QosPolicies, // used when creating a new DataWriter
   add_writer_sender: WakeSender<WriterIngredients>,
   remove_writer_sender: WakeUnboundedSender<GUID>,
-  discovery_command: WakeSender<DiscoveryCommand>,
+  discovery_command: WakeUnboundedSender<DiscoveryCommand>,
   security_plugins_handle: Option<SecurityPluginsHandle>,
   writer_ready: ReadySender<EntityId>,
 }
@@ -444,7 +444,7 @@ impl InnerPublisher {
     default_dw_qos: QosPolicies,
     add_writer_sender: WakeSender<WriterIngredients>,
     remove_writer_sender: WakeUnboundedSender<GUID>,
-    discovery_command: WakeSender<DiscoveryCommand>,
+    discovery_command: WakeUnboundedSender<DiscoveryCommand>,
     writer_ready: ReadySender<EntityId>,
     security_plugins_handle: Option<SecurityPluginsHandle>,
   ) -> Self {
@@ -679,7 +679,7 @@ impl InnerPublisher {
       db.update_topic_data_p(topic);
 
       // Inform Discovery about the topic
-      if let Err(e) = self.discovery_command.try_send(DiscoveryCommand::AddTopic {
+      if let Err(e) = self.discovery_command.send(DiscoveryCommand::AddTopic {
         topic_name: topic.name(),
       }) {
         // Log the error but don't quit, failing to inform Discovery about the topic
@@ -833,7 +833,7 @@ impl Subscriber {
     qos: QosPolicies,
     sender_add_reader: WakeSender<ReaderIngredients>,
     sender_remove_reader: WakeUnboundedSender<GUID>,
-    discovery_command: WakeSender<DiscoveryCommand>,
+    discovery_command: WakeUnboundedSender<DiscoveryCommand>,
     security_plugins_handle: Option<SecurityPluginsHandle>,
     reader_ready: ReadySender<EntityId>,
     discovery_samples: ReadySender<mio1::Token>,
@@ -1064,7 +1064,7 @@ pub struct InnerSubscriber {
   qos: QosPolicies,
   sender_add_reader: WakeSender<ReaderIngredients>,
   sender_remove_reader: WakeUnboundedSender<GUID>,
-  discovery_command: WakeSender<DiscoveryCommand>,
+  discovery_command: WakeUnboundedSender<DiscoveryCommand>,
   security_plugins_handle: Option<SecurityPluginsHandle>,
   reader_ready: ReadySender<EntityId>,
   discovery_samples: ReadySender<mio1::Token>,
@@ -1078,7 +1078,7 @@ impl InnerSubscriber {
     qos: QosPolicies,
     sender_add_reader: WakeSender<ReaderIngredients>,
     sender_remove_reader: WakeUnboundedSender<GUID>,
-    discovery_command: WakeSender<DiscoveryCommand>,
+    discovery_command: WakeUnboundedSender<DiscoveryCommand>,
     security_plugins_handle: Option<SecurityPluginsHandle>,
     reader_ready: ReadySender<EntityId>,
     discovery_samples: ReadySender<mio1::Token>,
@@ -1298,7 +1298,7 @@ impl InnerSubscriber {
       db.update_topic_data_p(topic);
 
       // Inform Discovery about the topic
-      if let Err(e) = self.discovery_command.try_send(DiscoveryCommand::AddTopic {
+      if let Err(e) = self.discovery_command.send(DiscoveryCommand::AddTopic {
         topic_name: topic.name(),
       }) {
         // Log the error but don't quit, failing to inform Discovery about the topic

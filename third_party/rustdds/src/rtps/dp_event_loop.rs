@@ -31,7 +31,7 @@ use crate::{
   },
   polling::{
     new_shared_timer, timeout_until, wake_channel, LoopWaker, ReadyReceiver, SharedTimer,
-    WakeReceiver, WakeSender,
+    WakeReceiver, WakeSender, WakeUnboundedSender,
   },
   //qos::HasQoSPolicy,
   rtps::{
@@ -133,7 +133,7 @@ pub struct DPEventLoop {
   participant_status_sender: StatusChannelSender<DomainParticipantStatusEvent>,
 
   discovery_update_notification_receiver: WakeReceiver<DiscoveryNotificationType>,
-  discovery_command_sender: WakeSender<DiscoveryCommand>,
+  discovery_command_sender: WakeUnboundedSender<DiscoveryCommand>,
 
   // Same-host loopback feature (participant-builder `same_host_loopback` knob):
   // when true, the SPDP writer announces to the localhost peers and writers may
@@ -157,7 +157,7 @@ impl DPEventLoop {
     remove_writer_receiver: TokenReceiverPair<GUID>,
     stop_poll_receiver: WakeReceiver<EventLoopCommand>,
     discovery_update_notification_receiver: WakeReceiver<DiscoveryNotificationType>,
-    discovery_command_sender: WakeSender<DiscoveryCommand>,
+    discovery_command_sender: WakeUnboundedSender<DiscoveryCommand>,
     spdp_liveness_sender: WakeSender<GuidPrefix>,
     participant_status_sender: StatusChannelSender<DomainParticipantStatusEvent>,
     security_plugins_opt: Option<SecurityPluginsHandle>,
@@ -1205,12 +1205,14 @@ impl DPEventLoop {
       DiscoveryCommand::AddLocalReader { guid }
     };
 
-    if let Err(e) = self.discovery_command_sender.try_send(discovery_command) {
+    // The command channel is unbounded: this loop must not block on Discovery
+    // (Discovery blocks on its notifications to this loop), and a command
+    // dropped here would leave the endpoint unannounced, never matched by any
+    // remote. The send fails only if Discovery has ended.
+    if let Err(e) = self.discovery_command_sender.send(discovery_command) {
       log::error!(
         "Failed to inform Discovery about the new endpoint: {e}. Endpoint guid: {guid:?}"
       );
-      // Improvement TODO: that's it, just an error log entry on failing to
-      // inform discovery?
     }
   }
 }
@@ -1292,7 +1294,7 @@ mod tests {
       wake_channel(8, &waker);
     let discovery_waker = LoopWaker::new();
     let (discovery_command_sender, _discovery_command_receiver) =
-      wake_channel::<DiscoveryCommand>(64, &discovery_waker);
+      wake_channel_unbounded::<DiscoveryCommand>(&discovery_waker);
     let (spdp_liveness_sender, _spdp_liveness_receiver) = wake_channel(8, &discovery_waker);
     let (_reader_ready_tx, reader_ready) = ready_channel(&waker);
     let (_writer_ready_tx, writer_ready) = ready_channel(&waker);
