@@ -4,7 +4,7 @@
 
 use anyhow::{bail, Context, Result};
 use learn::Method;
-use plan::{Deployment, FilterMargins, Margins, Safety, ScriptMargins};
+use plan::{Deployment, FilterMargins, Margins, MethodName, Safety, ScriptMargins};
 use policy::Policy;
 use std::path::Path;
 
@@ -64,24 +64,25 @@ fn script_label(m: &ScriptMargins) -> String {
 /// others have none.
 pub fn scripted(name: &str, margins: &Margins) -> Result<(Method, String)> {
     let g = margins.greedy_orca;
-    Ok(match name {
-        "greedy" => (Method::Greedy, name.into()),
-        "greedy-orca" if g.is_default() => (Method::greedy_orca(), name.into()),
-        "greedy-orca" => (
+    let method: MethodName = name.parse().map_err(|e| anyhow::anyhow!("--policy: {e}"))?;
+    Ok(match method {
+        MethodName::Greedy => (Method::Greedy, name.into()),
+        MethodName::GreedyOrca if g.is_default() => (Method::greedy_orca(), name.into()),
+        MethodName::GreedyOrca => (
             Method::GreedyOrca {
                 clearance: g.clearance,
                 obstacle_horizon: g.obstacle_horizon,
             },
             script_label(&g),
         ),
-        "matching-orca" => (
+        MethodName::MatchingOrca => (
             Method::MatchingOrca {
                 margins: margins.filter,
             },
             format!("{name}{}", margin_label(&margins.filter)),
         ),
-        "random" => (Method::Random, name.into()),
-        o => bail!("unknown --policy `{o}`: expected {SCRIPTS}"),
+        MethodName::Random => (Method::Random, name.into()),
+        MethodName::Policy => bail!("--policy policy: give the checkpoint with --checkpoint"),
     })
 }
 

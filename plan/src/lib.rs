@@ -25,6 +25,7 @@ pub mod greedy;
 pub mod machine_clock;
 pub mod margins;
 pub mod matching;
+pub mod method;
 pub mod orca;
 pub mod pilot;
 pub mod shield;
@@ -33,4 +34,5 @@ pub mod targets;
 
 pub use fleet::FleetParams;
 pub use margins::{Margins, ScriptMargins};
+pub use method::MethodName;
 pub use pilot::{Deployment, FilterMargins, MatchingOrca, Outputs, Pilot, Row, Safety};

@@ -24,7 +24,7 @@ pub struct Params {
     pub policy: Option<PathBuf>,
     /// `greedy`, `greedy-orca`, `matching-orca` or `policy`; default: `policy` if a policy
     /// path is given, else `greedy`.
-    pub controller: ControllerKind,
+    pub controller: plan::MethodName,
     /// Put the policy's actions behind the one-step action shield (plan::shield).
     pub shield: bool,
     /// Pass the policy's velocity through ORCA as a safety filter (plan::orca); None: on,
@@ -112,21 +112,12 @@ pub struct Params {
     pub stall_timeout_s: f64,
 }
 
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum ControllerKind {
-    Greedy,
-    GreedyOrca,
-    /// matching-ORCA (docs/adr/0020), behind the ORCA filter with the `orca_*` margins.
-    MatchingOrca,
-    Policy,
-}
-
 impl Default for Params {
     fn default() -> Self {
         Self {
             node: NodeArgs::new(DEFAULT_NODE_NAME),
             policy: None,
-            controller: ControllerKind::Greedy,
+            controller: plan::MethodName::Greedy,
             shield: false,
             orca_filter: None,
             orca_clearance: plan::orca::FILTER_CLEARANCE as f64,
@@ -235,7 +226,7 @@ where
     }
     // a policy path selects the policy controller unless `controller` was given
     if p.policy.is_some() && !was_set("controller") {
-        p.controller = ControllerKind::Policy;
+        p.controller = plan::MethodName::Policy;
     }
     Ok((p, warnings))
 }
@@ -245,20 +236,20 @@ fn apply_param(p: &mut Params, name: &str, v: &ParamValue) -> Result<bool, ArgEr
     match name {
         "policy" => p.policy = optional_path(name, v, "path")?,
         "controller" => {
+            let on_robot = plan::MethodName::ON_ROBOT;
+            let expected = || format!("expected {}", plan::MethodName::list(&on_robot));
             p.controller = match v {
-                ParamValue::Str(s) if s == "greedy" => ControllerKind::Greedy,
-                ParamValue::Str(s) if s == "greedy-orca" => ControllerKind::GreedyOrca,
-                ParamValue::Str(s) if s == "matching-orca" => ControllerKind::MatchingOrca,
-                ParamValue::Str(s) if s == "policy" => ControllerKind::Policy,
-                other => {
-                    return Err(param_error(
-                        name,
-                        format!(
-                            "expected `greedy`, `greedy-orca`, `matching-orca` or `policy`, \
-                             got {other:?}"
-                        ),
-                    ))
-                }
+                ParamValue::Str(s) => match s.parse::<plan::MethodName>() {
+                    Ok(m) if on_robot.contains(&m) => m,
+                    Ok(m) => {
+                        return Err(param_error(
+                            name,
+                            format!("`{m}` is an offline baseline: {}", expected()),
+                        ))
+                    }
+                    Err(e) => return Err(param_error(name, e)),
+                },
+                other => return Err(param_error(name, format!("{}, got {other:?}", expected()))),
             }
         }
         "shield" => p.shield = boolean(name, v)?,
@@ -466,7 +457,7 @@ mod tests {
             p.policy.as_deref(),
             Some(std::path::Path::new("/tmp/p.safetensors"))
         );
-        assert_eq!(p.controller, ControllerKind::Policy);
+        assert_eq!(p.controller, plan::MethodName::Policy);
         assert_eq!(p.control_rate_hz, 20.0);
         assert!(p.use_sim_time);
         assert_eq!(p.k_speed, 0.25);
@@ -488,7 +479,7 @@ mod tests {
         ]);
         assert_eq!(p.node.namespace, "/r1");
         assert_eq!(p.node.log_level.as_deref(), Some("warn"));
-        assert_eq!(p.controller, ControllerKind::Greedy);
+        assert_eq!(p.controller, plan::MethodName::Greedy);
         // remap aimed at another node is not ours
         let p = parse_ok(&["--ros-args", "-r", "other:__ns:=/x"]);
         assert_eq!(p.node.namespace, "/");
@@ -507,7 +498,7 @@ mod tests {
             "-p",
             "orca_obstacle_horizon:=0.3",
         ]);
-        assert_eq!(p.controller, ControllerKind::GreedyOrca);
+        assert_eq!(p.controller, plan::MethodName::GreedyOrca);
         assert_eq!(p.reach, Some(0.05));
         assert_eq!(p.orca_rest_clearance, 0.035);
         assert_eq!(p.orca_obstacle_horizon, 0.3);
@@ -519,7 +510,7 @@ mod tests {
             "-p",
             "shield:=true",
         ]);
-        assert_eq!(p.controller, ControllerKind::Policy);
+        assert_eq!(p.controller, plan::MethodName::Policy);
         assert!(p.shield);
         for bad in [
             "shield:=3",
@@ -600,6 +591,33 @@ mod tests {
         assert_eq!(p.k_speed, 1.0);
         assert_eq!(w.len(), 1);
         assert!(w[0].contains("foo"));
+    }
+
+    /// The launch file names the controllers robot_node takes, and no other.
+    #[test]
+    fn the_launch_files_controllers_are_robot_nodes() {
+        let path = concat!(
+            env!("CARGO_MANIFEST_DIR"),
+            "/../launch-scripts/fleet.launch.py"
+        );
+        let text = std::fs::read_to_string(path).unwrap();
+        let line = text
+            .lines()
+            .find(|l| l.starts_with("CONTROLLERS = ("))
+            .expect("CONTROLLERS in the launch file");
+        let names: Vec<&str> = line
+            .split('\'')
+            .skip(1)
+            .step_by(2)
+            .filter(|n| !n.is_empty())
+            .collect();
+        let ours: Vec<&str> = plan::MethodName::ON_ROBOT
+            .iter()
+            .map(|m| m.as_str())
+            .collect();
+        assert_eq!(names, ours);
+        let e = parse(["--ros-args", "-p", "controller:=random"], None).unwrap_err();
+        assert!(e.to_string().contains("offline baseline"), "{e}");
     }
 
     #[test]

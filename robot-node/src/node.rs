@@ -18,13 +18,14 @@ use tracing::{info, warn};
 
 use ros::RosNode;
 
-use crate::args::{ControllerKind, Params};
+use crate::args::Params;
 use crate::controller::{
     Controller, GreedyController, GreedyOrcaController, MatchingOrcaController, PolicyController,
 };
 use crate::hosted::RobotSpec;
 use crate::watchdog::{retry, NodeStage, Watchdog};
 use crate::world::Counters;
+use plan::MethodName;
 use plan::{Deployment, FilterMargins, FleetParams, Safety};
 
 /// Build the controller the parameters ask for, and the speed limit of its commands.
@@ -35,19 +36,21 @@ use plan::{Deployment, FilterMargins, FleetParams, Safety};
 pub fn make_controller(p: &Params) -> anyhow::Result<(Box<dyn Controller>, f64)> {
     let fleet = fleet_params(p);
     match p.controller {
-        ControllerKind::Greedy => Ok((
+        MethodName::Greedy => Ok((
             Box::new(GreedyController::new(fleet.greedy_params())),
             p.k_speed,
         )),
-        ControllerKind::GreedyOrca => Ok((
+        MethodName::GreedyOrca => Ok((
             Box::new(GreedyOrcaController::new(fleet.orca_params())?),
             p.k_speed,
         )),
-        ControllerKind::MatchingOrca => Ok((
+        MethodName::MatchingOrca => Ok((
             Box::new(MatchingOrcaController::new(&fleet, filter_margins(p))?),
             p.k_speed,
         )),
-        ControllerKind::Policy => policy_controller(p, fleet),
+        MethodName::Policy => policy_controller(p, fleet),
+        // refused when the parameter is read (args.rs); kept as an error, not a panic
+        MethodName::Random => anyhow::bail!("controller `random` is an offline baseline"),
     }
 }
 

@@ -9,6 +9,7 @@ use std::sync::mpsc::Sender;
 use std::time::Instant;
 
 use anyhow::{anyhow, bail, Context, Result};
+use plan::MethodName;
 
 use super::children::{BridgeProc, RobotProc};
 use super::domain::{self, DomainArg, Guard, MAX_DOMAIN};
@@ -43,19 +44,28 @@ pub(super) fn bundled_policy() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("policy/pretrained/smappo_6.4_2.safetensors")
 }
 
-/// `--policy` as given: `greedy` means no checkpoint; none means the bundled policy when it
-/// is present (a checkout without it falls back to greedy, and says so).
-fn resolve_policy(p: Option<PathBuf>) -> Option<PathBuf> {
-    match p {
-        Some(p) if p.as_os_str() == "greedy" => None,
-        Some(p) => Some(p),
-        None => {
+/// `--policy` as given: a script's name (`plan::MethodName`) is that robot_node controller
+/// and no checkpoint; a path is a checkpoint; none means the bundled policy when it is
+/// present (a checkout without it falls back to greedy, and says so).
+fn resolve_policy(p: Option<PathBuf>) -> Result<(MethodName, Option<PathBuf>)> {
+    let named = p
+        .as_ref()
+        .and_then(|p| p.to_str())
+        .and_then(|s| s.parse::<MethodName>().ok());
+    match (named, p) {
+        (Some(MethodName::Random), _) => {
+            bail!("--policy random: an offline baseline (tending eval), not a robot controller")
+        }
+        (Some(MethodName::Policy), _) => bail!("--policy policy: give the checkpoint's path"),
+        (Some(script), _) => Ok((script, None)),
+        (None, Some(p)) => Ok((MethodName::Policy, Some(p))),
+        (None, None) => {
             let b = bundled_policy();
             if b.exists() {
-                Some(b)
+                Ok((MethodName::Policy, Some(b)))
             } else {
                 eprintln!("fleet: no bundled policy at {}, using greedy", b.display());
-                None
+                Ok((MethodName::Greedy, None))
             }
         }
     }
@@ -106,6 +116,8 @@ pub(super) struct Plan {
     pub(super) sizes: sim::Sizes,
     /// The room the setup runs in (the paper's, or a grown floor's, docs/adr/0037).
     pub(super) room_size: f32,
+    /// What every robot_node runs (`controller` in fleet.yaml).
+    pub(super) controller: MethodName,
     pub(super) domain: u16,
     pub(super) lockstep: bool,
     pub(super) log_dir: PathBuf,
@@ -125,15 +137,8 @@ pub(super) struct Plan {
 
 impl Plan {
     pub(super) fn new(mut a: FleetArgs) -> Result<Plan> {
-        // greedy-ORCA and matching-ORCA are robot_node controllers (plan crate), not
-        // checkpoints: the robots get `controller:=NAME` and no policy.
-        for script in ["greedy-orca", "matching-orca"] {
-            if a.policy.as_deref() == Some(Path::new(script)) {
-                a.policy = Some("greedy".into());
-                a.robot_params.insert(0, format!("controller:={script}"));
-            }
-        }
-        a.policy = resolve_policy(a.policy.take());
+        let (controller, policy) = resolve_policy(a.policy.take())?;
+        a.policy = policy;
         let setup: sim::Setup = a.setup.parse().map_err(|e| anyhow!("--setup: {e}"))?;
         if !(a.duration.is_finite() && a.duration > 0.0) {
             bail!("--duration must be > 0");
@@ -211,6 +216,7 @@ impl Plan {
             setup,
             cfg,
             room_size,
+            controller,
             sizes,
             domain,
             log_dir,
@@ -268,7 +274,7 @@ impl Plan {
         match (&self.a.policy, forced) {
             (_, Some(c)) if c != "policy" => c.to_string(),
             (Some(p), _) => p.display().to_string(),
-            (None, _) => "greedy".into(),
+            (None, _) => self.controller.to_string(),
         }
     }
 
@@ -332,7 +338,8 @@ impl Plan {
         }
         let s = &self.sizes;
         let mut r = params::Section::default();
-        r.set("control_rate_hz", a.rate_hz)
+        r.set("controller", self.controller.as_str())
+            .set("control_rate_hz", a.rate_hz)
             .set_f32("k_speed", self.cfg.task.k_speed)
             .set("prep_steps", self.cfg.task.prep_steps)
             .set_f32("robot_radius", s.robot_radius)

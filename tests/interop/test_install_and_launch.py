@@ -343,4 +343,6 @@ def test_ros2_reads_the_parameters_file_tending_fleet_writes(tmp_path, ros):
     assert rb['robot_radius'].type_ == Parameter.Type.DOUBLE
     assert abs(rb['robot_radius'].value - 0.08) < 1e-6
     assert rb['lockstep'].value is True and 'policy' not in rb
+    assert rb['controller'].value == 'matching-orca'  # in the file, not on command lines
+    assert abs(rb['room_size'].value - 2.3) < 1e-6
     assert 'setup' not in rb and 'k_speed' not in b
