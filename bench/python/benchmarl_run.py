@@ -52,10 +52,18 @@ def main(argv=None):
     p.add_argument("--frames", type=int, default=64_000,
                    help="env steps to collect (BenchMARL frames: one per env per step)")
     p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--model", choices=("mlp", "smappo"), default="mlp",
+    p.add_argument("--model", choices=("mlp", "smappo", "rust"), default="mlp",
                    help="actor and critic model: BenchMARL's MLP (MAPPO as the paper's "
-                        "baseline) or the paper's attention encoder "
-                        "(tending.benchmarl_smappo: MAPPO with it is SMAPPO)")
+                        "baseline), the paper's attention encoder "
+                        "(tending.benchmarl_smappo: MAPPO with it is SMAPPO), or tending's "
+                        "own SMAPPO networks (tending.benchmarl_rust: the Rust actor and "
+                        "critic in torch, exported with --export)")
+    p.add_argument("--init", type=Path, default=None,
+                   help="with --model rust: start from this tending-policy checkpoint or "
+                        "trainer state (e.g. fine-tune a `tending train` policy)")
+    p.add_argument("--export", type=Path, default=None,
+                   help="with --model rust: write the trained policy here as a tending-policy "
+                        "checkpoint (tending eval --checkpoint, tending fleet --policy)")
     p.add_argument("--n-envs", type=int, default=None,
                    help="envs stepped together in Rust (default 32; 4 with --hparams mappo)")
     p.add_argument("--frames-per-batch", type=int, default=None,
@@ -174,13 +182,7 @@ def main(argv=None):
         setattr(algo, key, parse_value(value))
 
     if args.eval_only:
-        model = critic = None
-        if args.model == "smappo":
-            from tending.benchmarl_smappo import SmappoConfig
-
-            model = critic = SmappoConfig.for_setup(setup)
-        else:
-            model = MlpConfig.get_from_yaml()
+        model, critic = model_configs(args, setup, MlpConfig)
         import tempfile
 
         # BenchMARL writes its config and logs where it saves: a scratch folder, so the
@@ -205,21 +207,41 @@ def main(argv=None):
         print(f"greedy: {greedy:.1f} parts per episode ({args.eval_episodes} episodes)")
 
     log.start = time.perf_counter() - log.resumed_wall
-    if args.model == "smappo":
-        from tending.benchmarl_smappo import SmappoConfig
-
-        model = critic = SmappoConfig.for_setup(setup)
-    else:
-        model, critic = MlpConfig.get_from_yaml(), None
+    model, critic = model_configs(args, setup, MlpConfig)
     experiment = Experiment(task=task, algorithm_config=algo, model_config=model,
                             critic_model_config=critic, seed=args.seed, config=cfg,
                             callbacks=[log])
     experiment.run()
+    if args.export is not None:
+        from tending.benchmarl_rust import export_policy
+
+        export_policy(experiment, args.export, training={
+            "trained_by": "BenchMARL (bench/python/benchmarl_run.py --model rust)",
+            "algorithm": args.algorithm, "setup": setup, "frames": experiment.total_frames,
+            "seed": args.seed, "hparams": args.hparams})
+        print(f"exported the policy to {args.export} (tending eval --checkpoint {args.export})")
     wall = time.perf_counter() - log.start
     print(f"{args.algorithm} on {setup}: {experiment.total_frames} frames in {wall:.0f} s "
           f"(training wall time, across resumptions) "
           f"({experiment.total_frames / wall:.0f} frames/s overall, torch threads "
           f"{torch.get_num_threads()}); CSV in {out}")
+
+
+def model_configs(args, setup, MlpConfig):
+    """(actor model config, critic model config or None) for --model."""
+    if args.export is not None and args.model != "rust":
+        raise SystemExit("--export needs --model rust (the other models are not tending's networks)")
+    if args.model == "smappo":
+        from tending.benchmarl_smappo import SmappoConfig
+
+        model = SmappoConfig.for_setup(setup)
+        return model, model
+    if args.model == "rust":
+        from tending.benchmarl_rust import RustSmappoConfig
+
+        model = RustSmappoConfig.for_setup(setup, checkpoint=args.init)
+        return model, model
+    return MlpConfig.get_from_yaml(), None
 
 
 def evaluate(policy, setup, steps, episodes, seeds, frames, out):
