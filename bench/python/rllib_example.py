@@ -11,6 +11,12 @@ After training, the learned policy's greedy (argmax) actions are run for a few e
 in the env and its parts delivered are printed next to random actions and the scripted
 greedy baseline, so the figures say honestly how far the training got.
 
+`--model smappo`: instead of RLlib's MLP, tending's own SMAPPO networks
+(`tending.rllib.SmappoRLModule`: the Rust actor and centralised critic in torch, the Dict
+observation, MAPPO's PPO settings), the trained policy exported with `--export` as a
+`tending-policy` checkpoint (`tending eval --checkpoint`, `tending fleet --policy`).
+`--address` joins a running Ray cluster (`ray start --head` ...) instead of starting one.
+
 Usage (bench/python/run.sh does it): python bench/python/rllib_example.py --iters 10
 (`--csv`/`--png`: the per-iteration figures as a table and, with matplotlib, a plot;
 `--minutes` caps the training time. docs/bench/python.md has a 32-minute run.)
@@ -81,6 +87,13 @@ def main():
     ap.add_argument("--batch", type=int, default=2400,
                     help="env steps per training batch (x robots = agent-steps)")
     ap.add_argument("--eval-episodes", type=int, default=5)
+    ap.add_argument("--model", choices=("mlp", "smappo"), default="mlp",
+                    help="RLlib's default MLP on the flat observation, or tending's SMAPPO "
+                         "networks (tending.rllib) on the Dict one")
+    ap.add_argument("--export", default=None,
+                    help="with --model smappo: write the trained policy here (tending-policy)")
+    ap.add_argument("--address", default=None,
+                    help="ray.init(address=...): a running cluster's address, e.g. auto")
     ap.add_argument("--json", default=None, help="write the figures here")
     ap.add_argument("--md", default=None, help="append a markdown section of the figures here")
     ap.add_argument("--csv", default=None, help="write the per-iteration figures here")
@@ -94,10 +107,25 @@ def main():
     from ray.rllib.core.rl_module.rl_module import RLModuleSpec
     from ray.tune.registry import register_env
 
-    ray.init(num_cpus=max(2, a.runners + 1), include_dashboard=False, log_to_driver=False)
+    if a.address:
+        ray.init(address=a.address, log_to_driver=False)
+    else:
+        ray.init(num_cpus=max(2, a.runners + 1), include_dashboard=False, log_to_driver=False)
     register_env("tending", make_env)
     window = max(1, a.batch // EPISODE_STEPS)
-    config = (
+    if a.model == "smappo":
+        from tending.rllib import smappo_ppo_config
+
+        torch.set_num_threads(1)
+        config = (
+            smappo_ppo_config(a.setup, env_runners=a.runners)
+            .callbacks(on_episode_end=parts_logger(window))
+            .reporting(metrics_num_episodes_for_smoothing=window)
+            .training(train_batch_size_per_learner=a.batch)
+        )
+    else:
+        config = None
+    config = config or (
         PPOConfig()
         .environment("tending", env_config={"setup": a.setup, "seed": 0})
         .multi_agent(policies={"shared"}, policy_mapping_fn=lambda agent_id, *args, **kw: "shared")
@@ -134,13 +162,31 @@ def main():
     t_train = time.perf_counter() - t0
 
     module = algo.get_module("shared")
+    if a.model == "smappo":
+        from tending.rllib import export_policy
 
-    def learned(env, obs, genv, gobs):
-        x = torch.as_tensor(np.stack([obs[a] for a in env.agents]))
-        with torch.no_grad():
-            logits = module.forward_inference({"obs": x})["action_dist_inputs"]
-        acts = logits.argmax(-1).numpy()
-        return {a: int(acts[i]) for i, a in enumerate(env.agents)}
+        import tempfile
+
+        with tempfile.TemporaryDirectory() as tmp:
+            actor = export_policy(module, a.export or os.path.join(tmp, "policy.safetensors"))
+        if a.export:
+            print(f"exported the policy to {a.export} (tending eval --checkpoint {a.export})")
+        state = {}
+
+        def learned(env, obs, genv, gobs):
+            # the exported actor on the Dict observation, one GRU state per robot
+            if genv.metrics()["steps"] == 0:
+                state.clear()
+            arrs = dict(zip(("self", "machines", "storages", "peers"), genv.observe_arrays()))
+            acts, state["h"] = actor.act(arrs, state.get("h"))
+            return {ag: int(acts[i]) for i, ag in enumerate(env.agents)}
+    else:
+        def learned(env, obs, genv, gobs):
+            x = torch.as_tensor(np.stack([obs[a] for a in env.agents]))
+            with torch.no_grad():
+                logits = module.forward_inference({"obs": x})["action_dist_inputs"]
+            acts = logits.argmax(-1).numpy()
+            return {a: int(acts[i]) for i, a in enumerate(env.agents)}
 
     rng = np.random.default_rng(0)
 
