@@ -358,7 +358,7 @@ class Actor(_Recurrent):
     """The policy network of a ``tending-policy`` checkpoint (``policy::Actor``).
 
     ``Actor.load(path)`` / ``actor.save(path)`` read and write checkpoints that ``tending
-    eval``, ``tending fleet --checkpoint`` and robot_node load; ``state_dict()`` keys are the
+    eval``, ``tending fleet --policy`` and robot_node load; ``state_dict()`` keys are the
     checkpoint's tensor names."""
 
     def __init__(self, arch: Mapping | None = None, training: Any = None):
