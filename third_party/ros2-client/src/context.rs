@@ -1,6 +1,7 @@
 use std::{
   collections::HashMap,
-  sync::{Arc, Mutex},
+  sync::{Arc, Mutex, Weak, mpsc},
+  time::{Duration, Instant},
 };
 //use futures::{pin_mut, StreamExt};
 #[cfg(feature = "security")]
@@ -38,6 +39,17 @@ pub const DEFAULT_SUBSCRIPTION_QOS: QosProfile = QosProfile::subscription_defaul
 /// Basic Reliable QoS for publishing (same as
 /// [`QosProfile::publisher_default`]).
 pub const DEFAULT_PUBLISHER_QOS: QosProfile = QosProfile::publisher_default();
+
+/// Shortest time between two `ros_discovery_info` samples of one [`Context`]
+/// while its nodes keep adding Publishers and Subscriptions.
+///
+/// Every sample carries the full list of the Context's nodes and their
+/// endpoints, so publishing one per new endpoint costs O(endpoints^2) bytes
+/// for a node that creates its endpoints back to back. A change after a quiet
+/// period is published at once, as before; changes that follow within this
+/// interval are coalesced into one sample, published when the interval ends
+/// and describing the state at that moment.
+pub const ROS_DISCOVERY_INFO_MIN_INTERVAL: Duration = Duration::from_millis(100);
 
 #[cfg(feature = "security")]
 struct SecurityConfig {
@@ -302,8 +314,13 @@ impl Context {
     )
   }
 
-  pub(crate) fn update_node(&mut self, node_info: NodeEntitiesInfo) {
-    self.inner.lock().unwrap().update_node(node_info);
+  /// Register (or re-register) a local node's entity list, shared with the
+  /// Node, which keeps it up to date, and request a `ros_discovery_info`
+  /// update (coalesced, see [`ROS_DISCOVERY_INFO_MIN_INTERVAL`]).
+  pub(crate) fn update_node(&mut self, fqn: String, node_info: Arc<Mutex<NodeEntitiesInfo>>) {
+    let mut inner = self.inner.lock().unwrap();
+    inner.update_node(fqn, node_info);
+    inner.request_broadcast(&self.inner);
   }
 
   pub(crate) fn remove_node(&mut self, node_name: &str) {
@@ -324,7 +341,13 @@ impl Context {
 }
 
 struct ContextInner {
-  local_nodes: HashMap<String, NodeEntitiesInfo>,
+  // Shared with each Node, which adds its Readers and Writers to it.
+  local_nodes: HashMap<String, Arc<Mutex<NodeEntitiesInfo>>>,
+  // When ros_discovery_info was last published, whether a change waits to be
+  // published, and the thread that publishes it when the interval ends.
+  last_broadcast: Option<Instant>,
+  broadcast_pending: bool,
+  broadcast_flusher: Option<mpsc::Sender<Instant>>,
 
   // ROS Discovery: topic, reader and writer
   ros_discovery_topic: Topic,
@@ -380,6 +403,9 @@ impl ContextInner {
 
     Ok(ContextInner {
       local_nodes: HashMap::new(),
+      last_broadcast: None,
+      broadcast_pending: false,
+      broadcast_flusher: None,
       node_writer,
 
       domain_participant,
@@ -395,19 +421,28 @@ impl ContextInner {
   pub fn participant_entities_info(&self) -> ParticipantEntitiesInfo {
     ParticipantEntitiesInfo::new(
       Gid::from(self.domain_participant.guid()),
-      self.local_nodes.values().cloned().collect(),
+      self
+        .local_nodes
+        .values()
+        .map(|n| n.lock().unwrap().clone())
+        .collect(),
     )
   }
 
-  // Adds new NodeEntitiesInfo and updates our ContextInfo to ROS2 network
-  fn update_node(&mut self, mut node_info: NodeEntitiesInfo) {
-    // Each node connects also to the ROS discovery topic
-    node_info.add_writer(Gid::from(self.node_writer.guid()));
-
-    self
+  // Adds new NodeEntitiesInfo, to be sent to the ROS2 network
+  fn update_node(&mut self, fqn: String, node_info: Arc<Mutex<NodeEntitiesInfo>>) {
+    let known = self
       .local_nodes
-      .insert(node_info.fully_qualified_name(), node_info);
-    self.broadcast_node_infos();
+      .get(&fqn)
+      .is_some_and(|n| Arc::ptr_eq(n, &node_info));
+    if !known {
+      // Each node connects also to the ROS discovery topic
+      node_info
+        .lock()
+        .unwrap()
+        .add_writer(Gid::from(self.node_writer.guid()));
+      self.local_nodes.insert(fqn, node_info);
+    }
   }
 
   /// Removes NodeEntitiesInfo and updates our ContextInfo to ROS2 network
@@ -416,7 +451,52 @@ impl ContextInner {
     self.broadcast_node_infos();
   }
 
-  fn broadcast_node_infos(&self) {
+  /// Publish now if nothing was published within
+  /// [`ROS_DISCOVERY_INFO_MIN_INTERVAL`]; otherwise have the flusher thread
+  /// publish the then current state when the interval ends.
+  fn request_broadcast(&mut self, this: &Arc<Mutex<ContextInner>>) {
+    if self.broadcast_pending {
+      return; // the pending sample will carry this change too
+    }
+    let now = Instant::now();
+    let due = match self.last_broadcast {
+      Some(last) if now < last + ROS_DISCOVERY_INFO_MIN_INTERVAL => {
+        last + ROS_DISCOVERY_INFO_MIN_INTERVAL
+      }
+      _ => {
+        self.broadcast_node_infos();
+        return;
+      }
+    };
+    let flusher = self.broadcast_flusher.get_or_insert_with(|| {
+      let (sender, receiver) = mpsc::channel();
+      let weak = Arc::downgrade(this);
+      std::thread::Builder::new()
+        .name("ros_discovery_info".to_string())
+        .spawn(move || broadcast_flusher(weak, receiver))
+        .expect("spawn the ros_discovery_info thread");
+      sender
+    });
+    match flusher.send(due) {
+      Ok(()) => self.broadcast_pending = true,
+      Err(_) => {
+        // The flusher is gone (it cannot be while we live); publish now.
+        self.broadcast_flusher = None;
+        self.broadcast_node_infos();
+      }
+    }
+  }
+
+  /// Publish the pending change, if any (called by the flusher thread).
+  fn flush_pending_broadcast(&mut self) {
+    if self.broadcast_pending {
+      self.broadcast_node_infos();
+    }
+  }
+
+  fn broadcast_node_infos(&mut self) {
+    self.broadcast_pending = false;
+    self.last_broadcast = Some(Instant::now());
     let pei = self.participant_entities_info();
     debug!("ROS discovery publish: {pei:?}");
     self
@@ -425,6 +505,21 @@ impl ContextInner {
       .unwrap_or_else(|e| error!("Failed to write into node_writer {e:?}"));
   }
 } // impl ContextInner
+
+/// Publishes a coalesced `ros_discovery_info` change when its interval ends.
+/// Ends when the Context is dropped (its sender with it).
+fn broadcast_flusher(context: Weak<Mutex<ContextInner>>, due: mpsc::Receiver<Instant>) {
+  while let Ok(at) = due.recv() {
+    let now = Instant::now();
+    if at > now {
+      std::thread::sleep(at - now);
+    }
+    match context.upgrade() {
+      Some(inner) => inner.lock().unwrap().flush_pending_broadcast(),
+      None => break,
+    }
+  }
+}
 
 impl Drop for ContextInner {
   fn drop(&mut self) {

@@ -95,6 +95,16 @@ impl NodeEntitiesInfo {
       self.reader_gid_seq.push(gid);
     }
   }
+
+  // Append without the duplicate check (O(n)), for a caller that knows `gid`
+  // is new.
+  pub(crate) fn push_reader(&mut self, gid: Gid) {
+    self.reader_gid_seq.push(gid);
+  }
+
+  pub(crate) fn push_writer(&mut self, gid: Gid) {
+    self.writer_gid_seq.push(gid);
+  }
 }
 
 impl TryFrom<repr::NodeEntitiesInfo> for NodeEntitiesInfo {

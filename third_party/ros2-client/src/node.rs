@@ -520,6 +520,9 @@ pub struct Node {
   // These indicate what has been created locally.
   readers: BTreeSet<Gid>,
   writers: BTreeSet<Gid>,
+  // The same, as sent in ros_discovery_info: built as endpoints are added,
+  // shared with the Context, which publishes it (coalesced).
+  entities_info: Arc<Mutex<NodeEntitiesInfo>>,
 
   // Temporarily suppress sending updates, to prevent a flood of messages.
   suppress_node_info_updates: bool,
@@ -575,12 +578,16 @@ impl Node {
     )
     .map_err(NodeCreateError::BadParameter)?;
 
+    let mut entities_info = NodeEntitiesInfo::new(node_name.clone());
+    entities_info.add_writer(Gid::from(parameter_events_writer.guid()));
+
     let mut node = Node {
       node_name,
       options,
       ros_context,
       readers: BTreeSet::new(),
       writers: BTreeSet::new(),
+      entities_info: Arc::new(Mutex::new(entities_info)),
       readers_to_remote_writers: Arc::new(Mutex::new(BTreeMap::new())),
       writers_to_remote_readers: Arc::new(Mutex::new(BTreeMap::new())),
       external_nodes: Arc::new(Mutex::new(BTreeMap::new())),
@@ -746,24 +753,16 @@ impl Node {
     self.stop_spin_sender.is_some()
   }
 
-  // Generates ROS2 node info from added readers and writers.
-  fn generate_node_info(&self) -> NodeEntitiesInfo {
-    let mut node_info = NodeEntitiesInfo::new(self.node_name.clone());
-
-    node_info.add_writer(Gid::from(self.parameter_events_writer.guid()));
-    if let Some(ref row) = *self.rosout_writer {
-      node_info.add_writer(Gid::from(row.guid()));
-    }
-
-    for reader in &self.readers {
-      node_info.add_reader(*reader);
-    }
-
-    for writer in &self.writers {
-      node_info.add_writer(*writer);
-    }
-
-    node_info
+  // Hands the node info (kept up to date by add_reader / add_writer) to the
+  // Context, which publishes it in ros_discovery_info. The Context coalesces
+  // updates that follow each other closely (ROS_DISCOVERY_INFO_MIN_INTERVAL):
+  // rebuilding and publishing the whole list per endpoint cost O(endpoints^2)
+  // for a node creating many endpoints.
+  fn publish_node_info(&mut self) {
+    self.ros_context.update_node(
+      self.node_name.fully_qualified_name(),
+      Arc::clone(&self.entities_info),
+    );
   }
 
   fn suppress_node_info_updates(&mut self, suppress: bool) {
@@ -771,21 +770,25 @@ impl Node {
 
     // Send updates when suppression ends
     if !suppress {
-      self.ros_context.update_node(self.generate_node_info());
+      self.publish_node_info();
     }
   }
 
   fn add_reader(&mut self, reader: Gid) {
-    self.readers.insert(reader);
+    if self.readers.insert(reader) {
+      self.entities_info.lock().unwrap().push_reader(reader);
+    }
     if !self.suppress_node_info_updates {
-      self.ros_context.update_node(self.generate_node_info());
+      self.publish_node_info();
     }
   }
 
   fn add_writer(&mut self, writer: Gid) {
-    self.writers.insert(writer);
+    if self.writers.insert(writer) {
+      self.entities_info.lock().unwrap().push_writer(writer);
+    }
     if !self.suppress_node_info_updates {
-      self.ros_context.update_node(self.generate_node_info());
+      self.publish_node_info();
     }
   }
 
