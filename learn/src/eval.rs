@@ -6,12 +6,11 @@
 
 use super::trainer::TrainError;
 use crate::baselines::{fleet_params, random_action, GreedyOrcaFleet};
-use nn::categorical;
 use obs::ObsBatch;
 use plan::greedy::{greedy_action, GreedyParams};
 use plan::orca::{GREEDY_ORCA_CLEARANCE, OBSTACLE_HORIZON};
 use plan::pilot::{self, FilterMargins, MatchingOrca, Outputs, Pilot, Row, Safety};
-use policy::Actor;
+use policy::{Actor, Choice};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use rayon::prelude::*;
@@ -359,18 +358,19 @@ impl ActorRun {
         let logits = self.actor.forward_step(obs, &mut self.h, &self.masks)?;
         let mut actions = Vec::with_capacity(obs.rows);
         for (r, pilot) in pilots.iter().enumerate() {
-            let mut lg = &logits[r * k..(r + 1) * k];
-            if pilot.shielded() {
-                self.shielded.clear();
-                self.shielded.extend_from_slice(lg);
-                pilot.shield_logits(Row::of(obs, r), &mut self.shielded);
-                lg = &self.shielded;
-            }
-            actions.push(if self.sample {
-                categorical::sample(lg, rng.gen::<f32>())
+            let choice = if self.sample {
+                Choice::Sample(rng.gen::<f32>())
             } else {
-                categorical::argmax(lg)
-            } as u8);
+                Choice::Argmax
+            };
+            let lg = &logits[r * k..(r + 1) * k];
+            actions.push(policy::choose(
+                pilot,
+                Row::of(obs, r),
+                lg,
+                choice,
+                &mut self.shielded,
+            ));
         }
         Ok(actions)
     }

@@ -10,6 +10,7 @@
 
 pub mod actor;
 pub mod checkpoint;
+pub mod choice;
 pub mod config;
 pub mod critic;
 pub mod encoder;
@@ -23,6 +24,7 @@ pub mod sequences;
 
 pub use actor::{Actor, ActorLossStats, PpoActorConfig};
 pub use checkpoint::{CheckpointError, CheckpointMeta};
+pub use choice::{choose, Choice};
 pub use config::{ActionSpace, ArchConfig, FlatLayoutConfig, ModelKind};
 pub use critic::{Critic, ValueLossConfig, ValueLossStats};
 pub use error::PolicyError;

@@ -225,15 +225,14 @@ impl PolicyController {
             .as_ref()
             .ok_or_else(|| anyhow::anyhow!("policy controller without its pilot"))?;
         let logits = self.policy.logits(obs, &mut self.state)?;
-        let a = if pilot.shielded() {
-            self.shielded.clear();
-            self.shielded.extend_from_slice(logits);
-            pilot.shield_logits(Row::of(obs, 0), &mut self.shielded);
-            nn::categorical::argmax(&self.shielded)
-        } else {
-            nn::categorical::argmax(logits)
-        };
-        Ok(a as u8)
+        let row = Row::of(obs, 0);
+        Ok(policy::choose(
+            pilot,
+            row,
+            logits,
+            policy::Choice::Argmax,
+            &mut self.shielded,
+        ))
     }
 }
 
