@@ -189,7 +189,11 @@ mod tests {
     fn bad_arguments_are_clear_errors() {
         let cfg = ScenarioConfig::default();
         let e = episodes(&args(&["--policy", "greedy-lol"]), &cfg).unwrap_err();
-        assert!(e.to_string().contains("--policy: unknown controller `greedy-lol`"), "{e}");
+        assert!(
+            e.to_string()
+                .contains("--policy: unknown controller `greedy-lol`"),
+            "{e}"
+        );
         let e = episodes(&args(&["--checkpoint", "/nonexistent.safetensors"]), &cfg).unwrap_err();
         assert!(
             format!("{e:#}").contains("/nonexistent.safetensors"),
