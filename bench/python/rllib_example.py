@@ -20,6 +20,14 @@ observation, MAPPO's PPO settings), the trained policy exported with `--export` 
 Usage (bench/python/run.sh does it): python bench/python/rllib_example.py --iters 10
 (`--csv`/`--png`: the per-iteration figures as a table and, with matplotlib, a plot;
 `--minutes` caps the training time. docs/bench/python.md has a 32-minute run.)
+
+Long runs (`--model smappo --out DIR --checkpoint-every N`): every N iterations the policy
+is exported (`DIR/policy.safetensors`, the trainer state beside it), evaluated in Rust
+(`--tending-bin`: `tending eval --checkpoint`, argmax, `--ckpt-eval-episodes` layouts of
+seed 100, not the seeds the final evaluation reports), the best one so far kept as
+`DIR/best.safetensors`, and RLlib's own checkpoint written to `DIR/algo`, from which
+`--resume` goes on after a stop; every iteration is appended to `DIR/progress.csv`.
+docs/bench/rllib_cluster.md has a run on a two-node Ray cluster.
 """
 
 from __future__ import annotations
@@ -84,8 +92,9 @@ def main():
     ap.add_argument("--minutes", type=float, default=None,
                     help="stop training after this many minutes even if --iters are not done")
     ap.add_argument("--runners", type=int, default=2, help="RLlib env runners (Ray actors)")
-    ap.add_argument("--batch", type=int, default=2400,
-                    help="env steps per training batch (x robots = agent-steps)")
+    ap.add_argument("--batch", type=int, default=None,
+                    help="env steps per training batch (x robots = agent-steps); default 2400 "
+                         "(both; tending.rllib's MAPPO settings for smappo)")
     ap.add_argument("--eval-episodes", type=int, default=5)
     ap.add_argument("--model", choices=("mlp", "smappo"), default="mlp",
                     help="RLlib's default MLP on the flat observation, or tending's SMAPPO "
@@ -97,6 +106,19 @@ def main():
     ap.add_argument("--json", default=None, help="write the figures here")
     ap.add_argument("--md", default=None, help="append a markdown section of the figures here")
     ap.add_argument("--csv", default=None, help="write the per-iteration figures here")
+    ap.add_argument("--out", default=None,
+                    help="with --model smappo: a run directory (progress.csv, periodic exports, "
+                         "RLlib checkpoint for --resume)")
+    ap.add_argument("--checkpoint-every", type=int, default=10,
+                    help="with --out: export, evaluate and checkpoint every this many iterations")
+    ap.add_argument("--resume", action="store_true",
+                    help="with --out: restore DIR/algo and go on (its progress.csv is kept)")
+    ap.add_argument("--tending-bin", default=None,
+                    help="the tending binary: evaluate each periodic export in Rust")
+    ap.add_argument("--ckpt-eval-episodes", type=int, default=20)
+    ap.add_argument("--train-set", action="append", default=[], metavar="KEY=VALUE",
+                    help="with --model smappo: a PPOConfig.training() field (a Python literal), "
+                         "e.g. lr=3e-4; repeatable")
     ap.add_argument("--png", default=None, help="plot return and parts per iteration here")
     a = ap.parse_args()
 
@@ -112,16 +134,24 @@ def main():
     else:
         ray.init(num_cpus=max(2, a.runners + 1), include_dashboard=False, log_to_driver=False)
     register_env("tending", make_env)
+    if a.batch is None:
+        a.batch = 2400
     window = max(1, a.batch // EPISODE_STEPS)
     if a.model == "smappo":
+        import ast
+
         from tending.rllib import smappo_ppo_config
 
         torch.set_num_threads(1)
+        extra = {}
+        for kv in a.train_set:
+            k, v = kv.split("=", 1)
+            extra[k] = ast.literal_eval(v)
         config = (
             smappo_ppo_config(a.setup, env_runners=a.runners)
             .callbacks(on_episode_end=parts_logger(window))
             .reporting(metrics_num_episodes_for_smoothing=window)
-            .training(train_batch_size_per_learner=a.batch)
+            .training(train_batch_size_per_learner=a.batch, **extra)
         )
     else:
         config = None
@@ -139,26 +169,51 @@ def main():
     t0 = time.perf_counter()
     algo = config.build_algo()
     t_build = time.perf_counter() - t0
+    print(json.dumps({"build_seconds": round(t_build, 1), **runner_nodes(algo, ray)}), flush=True)
     rows = []
-    for it in range(a.iters):
+    run = RunDir(a.out, algo, a) if a.out else None
+    if run and a.resume:
+        rows = run.restore()
+    t_prev = rows[-1]["wall_seconds"] if rows else 0.0
+    steps_prev = rows[-1]["env_steps_lifetime"] if rows else 0
+    # after --resume: RLlib's lifetime counters may start again from 0; carry the run's on
+    offset = None if rows else (0, 0)
+    while len(rows) < a.iters:
         t = time.perf_counter()
         r = algo.train()
         dt = time.perf_counter() - t
         er = r.get("env_runners", {})
+        timers = r.get("timers", {})
         row = {
-            "iter": it + 1,
+            "iter": len(rows) + 1,
             "seconds": round(dt, 1),
             "agent_steps": er.get("num_agent_steps_sampled_lifetime", {}),
             "env_steps_lifetime": er.get("num_env_steps_sampled_lifetime"),
             "episode_return_mean": er.get("episode_return_mean"),
             "parts_delivered_mean": er.get("parts_delivered"),
+            "sample_seconds": _num(timers.get("env_runner_sampling_timer")),
+            "learn_seconds": _num(timers.get("learner_update_timer")),
         }
         if isinstance(row["agent_steps"], dict):
             row["agent_steps"] = int(sum(row["agent_steps"].values()))
+        if offset is None:
+            fresh = (row["env_steps_lifetime"] or 0) < steps_prev
+            offset = (steps_prev, rows[-1]["agent_steps"]) if fresh else (0, 0)
+        row["env_steps_lifetime"] = (row["env_steps_lifetime"] or 0) + offset[0]
+        row["agent_steps"] = (row["agent_steps"] or 0) + offset[1]
+        steps = row["env_steps_lifetime"]
+        row["env_steps_per_s"] = round((steps - steps_prev) / dt, 1)
+        steps_prev = steps
+        row["wall_seconds"] = round(t_prev + time.perf_counter() - t0, 1)
+        if run:
+            run.after_iteration(row)
         rows.append(row)
         print(json.dumps(row), flush=True)
         if a.minutes is not None and time.perf_counter() - t0 > 60 * a.minutes:
             break
+    if run and rows and rows[-1].get("eval_parts") is None:
+        run.checkpoint(rows[-1])
+        run.write_progress(rows)
     t_train = time.perf_counter() - t0
 
     module = algo.get_module("shared")
@@ -228,11 +283,126 @@ def main():
     ray.shutdown()
 
 
+def _num(v):
+    """A timer of RLlib's result dict as seconds (it may be a number or a dict of stats)."""
+    if isinstance(v, dict):
+        v = v.get("mean", next(iter(v.values()), None))
+    return None if v is None else round(float(v), 2)
+
+
+def runner_nodes(algo, ray):
+    """The Ray node and host each remote env runner lives on."""
+    import socket
+
+    def where(er):
+        return ray.get_runtime_context().get_node_id(), socket.gethostname(), os.getpid()
+
+    try:
+        found = algo.env_runner_group.foreach_env_runner(where, local_env_runner=False)
+    except Exception as e:  # noqa: BLE001 - no remote runners, or an API change
+        return {"runner_nodes": f"n/a ({type(e).__name__})"}
+    nodes = [n for n, _, _ in found]
+    return {
+        "runner_nodes": [n[:12] for n in nodes],
+        "runners_per_node": {n[:12]: nodes.count(n) for n in sorted(set(nodes))},
+        "cluster_nodes": [n["NodeID"][:12] for n in ray.nodes() if n.get("Alive")],
+    }
+
+
+class RunDir:
+    """A long run's directory: progress.csv every iteration; every `checkpoint_every`
+    iterations the exported policy and trainer state, a Rust evaluation of the policy, the
+    best-so-far policy, and RLlib's checkpoint (for --resume)."""
+
+    FIELDS = ("iter", "seconds", "agent_steps", "env_steps_lifetime", "episode_return_mean",
+              "parts_delivered_mean", "sample_seconds", "learn_seconds", "env_steps_per_s",
+              "wall_seconds", "eval_parts", "eval_contacts")
+
+    def __init__(self, path, algo, args):
+        self.path, self.algo, self.a = path, algo, args
+        os.makedirs(path, exist_ok=True)
+        self.best = None
+
+    def restore(self):
+        import csv
+
+        self.algo.restore_from_path(os.path.abspath(os.path.join(self.path, "algo")))
+        with open(os.path.join(self.path, "progress.csv")) as fh:
+            rows = [{k: _parse(v) for k, v in r.items()} for r in csv.DictReader(fh)]
+        last_ck = max((r["iter"] for r in rows if r.get("eval_parts") is not None), default=0)
+        rows = [r for r in rows if r["iter"] <= last_ck]  # what the restored algo has seen
+        evals = [r["eval_parts"] for r in rows if r.get("eval_parts") is not None]
+        self.best = max(evals) if evals else None
+        print(f"resumed from {self.path}/algo at iteration {last_ck}", flush=True)
+        return rows
+
+    def after_iteration(self, row):
+        row.setdefault("eval_parts", None)
+        row.setdefault("eval_contacts", None)
+        if row["iter"] % self.a.checkpoint_every == 0:
+            self.checkpoint(row)
+        self._append(row)
+
+    def _append(self, row):
+        import csv
+
+        f = os.path.join(self.path, "progress.csv")
+        new = not os.path.exists(f) or row["iter"] == 1
+        with open(f, "w" if new else "a", newline="") as fh:
+            w = csv.DictWriter(fh, fieldnames=self.FIELDS, extrasaction="ignore")
+            if new:
+                w.writeheader()
+            w.writerow(row)
+
+    def write_progress(self, rows):
+        import csv
+
+        with open(os.path.join(self.path, "progress.csv"), "w", newline="") as fh:
+            w = csv.DictWriter(fh, fieldnames=self.FIELDS, extrasaction="ignore")
+            w.writeheader()
+            w.writerows(rows)
+
+    def checkpoint(self, row):
+        import shutil
+        import subprocess
+
+        from tending.rllib import export_policy, export_trainer_state
+
+        pol = os.path.join(self.path, "policy.safetensors")
+        info = {"trained_by": "ray.rllib PPO (tending.rllib, bench/python/rllib_example.py)",
+                "iteration": row["iter"], "env_steps": row["env_steps_lifetime"]}
+        export_policy(self.algo, pol, training=info)
+        export_trainer_state(self.algo, os.path.join(self.path, "trainer_state.safetensors"))
+        if self.a.tending_bin:
+            out = subprocess.run(
+                [self.a.tending_bin, "eval", "--checkpoint", pol, "--setups", self.a.setup,
+                 "--seeds", "100", "--episodes", str(self.a.ckpt_eval_episodes)],
+                capture_output=True, text=True, check=True).stdout
+            cells = [c.strip() for c in next(
+                ln for ln in out.splitlines() if ln.startswith(f"| {self.a.setup} ")).split("|")]
+            row["eval_parts"] = float(cells[2].split()[0])
+            row["eval_contacts"] = float(cells[3].split()[0])
+            if self.best is None or row["eval_parts"] >= self.best:
+                self.best = row["eval_parts"]
+                shutil.copyfile(pol, os.path.join(self.path, "best.safetensors"))
+        self.algo.save_to_path(os.path.abspath(os.path.join(self.path, "algo")))
+
+
+def _parse(v):
+    if v in ("", None):
+        return None
+    try:
+        f = float(v)
+    except ValueError:
+        return v
+    return int(f) if f.is_integer() and "." not in v else f
+
+
 def write_csv(path, rows):
     import csv
 
     with open(path, "w", newline="") as fh:
-        w = csv.DictWriter(fh, fieldnames=list(rows[0]))
+        w = csv.DictWriter(fh, fieldnames=list(rows[0]), extrasaction="ignore")
         w.writeheader()
         w.writerows(rows)
 
@@ -251,6 +421,9 @@ def plot(path, out):
     ax1.plot(x, [r["episode_return_mean"] for r in rows])
     ax1.set(xlabel="env steps", ylabel="episode return (mean, team)", title="return")
     ax2.plot(x, [r["parts_delivered_mean"] for r in rows], label="PPO (RLlib), training episodes")
+    ev = [(r["env_steps_lifetime"], r["eval_parts"]) for r in rows if r.get("eval_parts") is not None]
+    if ev:
+        ax2.plot(*zip(*ev), "o-", ms=3, label="exported policy, tending eval (argmax)")
     for name, style in [("random", ":"), ("greedy", "--")]:
         ax2.axhline(out["eval"][name]["parts_delivered"], ls=style, c="grey", label=name)
     ax2.set(xlabel="env steps", ylabel="parts delivered per episode", title="parts delivered")

@@ -59,6 +59,7 @@ MODULE_ID = "shared"
 
 __all__ = [
     "MODULE_ID",
+    "SmappoPPOLearner",
     "SmappoRLModule",
     "TendingMultiAgentEnv",
     "export_policy",
@@ -155,6 +156,13 @@ class SmappoRLModule(TorchRLModule, ValueFunctionAPI):
         n = self.action_space.n
         if n != self.actor.arch["n_actions"]:
             raise ValueError(f"the env has {n} actions, the actor {self.actor.arch['n_actions']}")
+        # MAPPO's ValueNorm (learn/src/valuenorm.rs): running mean, mean of squares and
+        # debiasing term of the returns; the critic's head learns normalised values and
+        # compute_values() gives them denormalised (what GAE needs). Updated by
+        # SmappoPPOLearner once per minibatch, as MAPPO and `tending train` do.
+        self.value_norm = bool(cfg.get("value_norm", False))
+        self.register_buffer("vn_stats", torch.zeros(3, dtype=torch.float64))
+        self._values_normalised = False  # set by the learner around its loss
 
     def get_initial_state(self) -> Any:
         h = self.actor.hidden
@@ -197,23 +205,103 @@ class SmappoRLModule(TorchRLModule, ValueFunctionAPI):
 
     def compute_values(self, batch, embeddings=None):
         v, _ = self._critic_seq(batch)
+        if self.value_norm and not self._values_normalised:
+            mean, var = self.vn_mean_var()
+            v = (v.double() * var.sqrt() + mean).to(v.dtype)
         return v
+
+    # ---- ValueNorm (MAPPO's, beta 0.99999; inactive unless model_config value_norm)
+
+    VN_BETA = 0.99999
+
+    def vn_mean_var(self):
+        m, m2, d = self.vn_stats.unbind()
+        d = d.clamp(min=1e-5)
+        mean = m / d
+        return mean, (m2 / d - mean * mean).clamp(min=1e-2)
+
+    @torch.no_grad()
+    def vn_update(self, returns: torch.Tensor) -> None:
+        x = returns.detach().double().flatten()
+        if x.numel() == 0:
+            return
+        b = self.VN_BETA
+        new = torch.stack([x.mean(), (x * x).mean(), torch.ones((), dtype=x.dtype)])
+        self.vn_stats.mul_(b).add_((1.0 - b) * new.to(self.vn_stats.device))
+
+    def vn_normalize(self, x: torch.Tensor) -> torch.Tensor:
+        mean, var = self.vn_mean_var()
+        return ((x.double() - mean) / var.sqrt()).to(x.dtype)
+
+
+def _ppo_torch_learner():
+    from ray.rllib.algorithms.ppo.torch.ppo_torch_learner import PPOTorchLearner
+
+    return PPOTorchLearner
+
+
+class SmappoPPOLearner(_ppo_torch_learner()):
+    """RLlib's PPO torch learner with MAPPO's two optimizers: one Adam (eps 1e-5) for the
+    actor and one for the critic, each gradient clipped on its own (RLlib clips per
+    optimizer). With RLlib's single optimizer the global-norm clip is taken over actor and
+    critic together, so the critic's gradient (values in return units, no ValueNorm here)
+    sets the clip and scales the actor's step down with it."""
+
+    def compute_loss_for_module(self, *, module_id, config, batch, fwd_out):
+        """RLlib's PPO loss; with ValueNorm, on normalised values and value targets (the
+        statistics first take in this minibatch's targets, as MAPPO's)."""
+        module = self.module[module_id].unwrapped()
+        if not getattr(module, "value_norm", False):
+            return super().compute_loss_for_module(
+                module_id=module_id, config=config, batch=batch, fwd_out=fwd_out)
+        from ray.rllib.evaluation.postprocessing import Postprocessing
+
+        targets = batch[Postprocessing.VALUE_TARGETS]
+        mask = batch.get(Columns.LOSS_MASK)
+        module.vn_update(targets[mask] if mask is not None else targets)
+        batch = dict(batch)
+        batch[Postprocessing.VALUE_TARGETS] = module.vn_normalize(targets)
+        module._values_normalised = True
+        try:
+            return super().compute_loss_for_module(
+                module_id=module_id, config=config, batch=batch, fwd_out=fwd_out)
+        finally:
+            module._values_normalised = False
+
+    def configure_optimizers_for_module(self, module_id, config=None):
+        module = self._module[module_id]
+        module = module.unwrapped() if hasattr(module, "unwrapped") else module
+        for name, sub in (("actor", module.actor), ("critic", module.critic)):
+            params = list(sub.parameters())
+            self.register_optimizer(
+                module_id=module_id, optimizer_name=name, params=params,
+                optimizer=torch.optim.Adam(params, eps=1e-5), lr_or_lr_schedule=config.lr,
+            )
 
 
 def smappo_ppo_config(setup: str = "6.4_2", *, seed: int = 0, env_runners: int = 0,
                       envs_per_runner: int = 1, centralised_critic: bool = True,
                       arch: Mapping | None = None, checkpoint: str | os.PathLike | None = None,
-                      max_seq_len: int = 10, hparams: str = "mappo"):
+                      max_seq_len: int = 10, hparams: str = "mappo", value_norm: bool = True):
     """A ``PPOConfig`` (new API stack) of tending at ``setup`` with one shared
     :class:`SmappoRLModule`. ``hparams="mappo"`` sets what ``tending train`` uses (Yu et al.'s
-    MAPPO: lr 5e-4, entropy 0.01, GAE lambda 0.95, gamma 0.99, clip 0.2, gradient norm 10,
-    10 epochs, 4 minibatches of a 4-env x 200-step batch); ``"rllib"`` keeps RLlib's
-    defaults. Change anything further on the returned config."""
+    MAPPO: lr 5e-4, entropy 0.01, GAE lambda 0.95, gamma 0.99, clip 0.2, 10 epochs;
+    separate Adam optimizers for actor and critic, eps 1e-5, each gradient clipped at norm
+    10, :class:`SmappoPPOLearner`). RLlib counts the batch (``train_batch_size_per_learner``)
+    in env steps but slices minibatches (``minibatch_size``) from the shared module's
+    agent-steps, and refuses a minibatch larger than the batch; so the batch is 2,400 env
+    steps (12 episodes) and a minibatch 2,400 agent-steps: at 6.4_2 (6 robots) 6 minibatches
+    an epoch, the minibatch size and the Adam steps per sample of the paper runs' ``tending
+    train`` (``results/paper/A_6.4_2.train.toml``: 8 episodes an update, 4 minibatches of
+    2,400). ``"rllib"`` keeps RLlib's defaults. Change anything further on the returned
+    config. ``value_norm`` (with ``"mappo"``): MAPPO's ValueNorm, as ``tending train``'s
+    ``use_valuenorm`` (the critic learns normalised returns; see :class:`SmappoRLModule`)."""
     from ray.rllib.algorithms.ppo import PPOConfig
     from ray.rllib.core.rl_module.multi_rl_module import MultiRLModuleSpec
     from ray.rllib.core.rl_module.rl_module import RLModuleSpec
 
-    model_config = {"max_seq_len": int(max_seq_len), "arch": dict(arch or {})}
+    model_config = {"max_seq_len": int(max_seq_len), "arch": dict(arch or {}),
+                    "value_norm": bool(value_norm) and hparams == "mappo"}
     if checkpoint is not None:
         model_config["checkpoint"] = os.fspath(checkpoint)
     config = (
@@ -230,9 +318,9 @@ def smappo_ppo_config(setup: str = "6.4_2", *, seed: int = 0, env_runners: int =
         config = config.training(
             lr=5e-4, entropy_coeff=0.01, lambda_=0.95, gamma=0.99, clip_param=0.2,
             grad_clip=10.0, grad_clip_by="global_norm", num_epochs=10,
-            train_batch_size_per_learner=800, minibatch_size=200, vf_loss_coeff=1.0,
-            use_kl_loss=False, vf_clip_param=float("inf"),
-        )
+            train_batch_size_per_learner=2400, minibatch_size=2400,
+            vf_loss_coeff=1.0, use_kl_loss=False, vf_clip_param=float("inf"),
+        ).learners(learner_class=SmappoPPOLearner)
     elif hparams != "rllib":
         raise ValueError(f"hparams: {hparams!r} is not 'mappo' or 'rllib'")
     return config

@@ -1,7 +1,7 @@
 """tending.rllib: the RLlib RLModule is tending.smappo_torch's actor and critic, and what
 PPO trains with it exports to a checkpoint that `tending eval` runs.
 
-A smoke test only (one PPO iteration of 800 env steps, one epoch): that it learns is the
+A smoke test only (one PPO iteration of 2,400 env steps, one epoch): that it learns is the
 Ray-cluster run's job (issue 48). ray[rllib] and torch are not installed by CI: these tests
 skip, saying so, when either is absent.
 """
@@ -74,6 +74,35 @@ def test_module_runs_the_rust_networks(centralised):
             state = out[Columns.STATE_OUT]
             acts = logits.argmax(-1).tolist()
             obs, *_ = env.step(dict(zip(agents, acts)))
+
+
+def test_value_norm_is_mappos():
+    """The module's ValueNorm is learn/src/valuenorm.rs's (MAPPO's): its reference numbers for
+    two updates with beta 0.9, the variance floor, and compute_values denormalising the
+    critic's output (normalised while the learner's loss runs)."""
+    env = TendingMultiAgentEnv({"setup": "6.4_2"})
+    m = module_for(env, value_norm=True)
+    mean, var = m.vn_mean_var()  # never updated: mean 0, variance at its floor
+    assert mean.item() == 0.0 and abs(var.item() - 1e-2) < 1e-15
+    m.VN_BETA = 0.9
+    m.vn_update(torch.tensor([1.0, 3.0]))
+    mean, var = m.vn_mean_var()
+    assert abs(mean.item() - 2.0) < 1e-12 and abs(var.item() - 1.0) < 1e-12
+    assert abs(m.vn_normalize(torch.tensor([3.0])).item() - 1.0) < 1e-6
+    m.vn_update(torch.tensor([4.0]))
+    mean, var = m.vn_mean_var()
+    assert abs(mean.item() - 3.0526315789) < 1e-9 and abs(var.item() - 1.4709141274) < 1e-9
+    obs, _ = env.reset(seed=0)
+    agents = list(obs)
+    state = {k: torch.from_numpy(np.stack([v] * len(agents))) for k, v in m.get_initial_state().items()}
+    batch = batch_of(obs, agents, state)
+    with torch.no_grad():
+        m._values_normalised = True
+        raw = m.compute_values(batch)
+        m._values_normalised = False
+        v = m.compute_values(batch)
+    assert torch.allclose(v, raw * var.sqrt().float() + mean.float(), atol=1e-5)
+    assert "vn_stats" in m.state_dict()  # carried to the env runners and into RLlib checkpoints
 
 
 def test_ppo_iteration_exports_a_checkpoint_tending_eval_runs(tmp_path, tending_bin):
