@@ -43,6 +43,9 @@ pub fn contract_topic(name: &str) -> Option<(String, &'static msgs::MsgDef, msgs
     if let Some((def, p)) = fixed {
         return Some((ros, def, p));
     }
+    if msgs::cells::parse_cell_topic(&ros).is_some() {
+        return Some((ros, &schema::PATH, Profile::Cell));
+    }
     let t = topics::parse_topic(name)?;
     Some((t.ros_name(), t.msg_def()?, t.profile()?))
 }

@@ -7,6 +7,7 @@
 //! Only standard types cross the wire, so stock ROS 2 tools read everything.
 
 pub mod cdr;
+pub mod cells;
 pub mod enclave;
 pub mod qos;
 pub mod schema;

@@ -50,6 +50,12 @@ pub const fn visualization() -> QosProfile {
     base(Durability::Volatile, 10)
 }
 
+/// `/tending/cells/c<i>_<j>`: reliable, transient local, keep last 1: a robot that enters
+/// a cell gets the cell's latest state at once (docs/adr/0038-cell-topics.md).
+pub const fn cell() -> QosProfile {
+    base(Durability::TransientLocal, 1)
+}
+
 /// Which profile a topic uses.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
 pub enum Profile {
@@ -58,6 +64,7 @@ pub enum Profile {
     LatchedPose,
     PartReady,
     Visualization,
+    Cell,
 }
 
 impl Profile {
@@ -68,6 +75,7 @@ impl Profile {
             Profile::LatchedPose => latched_pose(),
             Profile::PartReady => part_ready(),
             Profile::Visualization => visualization(),
+            Profile::Cell => cell(),
         }
     }
 
@@ -141,6 +149,7 @@ mod tests {
             Profile::LatchedPose,
             Profile::PartReady,
             Profile::Visualization,
+            Profile::Cell,
         ] {
             assert_ne!(p.qos(), QosProfile::subscription_default());
         }

@@ -158,6 +158,13 @@ def!(
     "std_msgs/Header header\nPose pose\n"
 );
 def!(
+    PATH,
+    "nav_msgs",
+    "Path",
+    [HEADER, POSE_STAMPED],
+    "std_msgs/Header header\ngeometry_msgs/PoseStamped[] poses\n"
+);
+def!(
     VECTOR3,
     "geometry_msgs",
     "Vector3",
@@ -310,6 +317,7 @@ impl_msg!(
     Quaternion => QUATERNION,
     Pose => POSE,
     PoseStamped => POSE_STAMPED,
+    Path => PATH,
     Vector3 => VECTOR3,
     Twist => TWIST,
     Clock => CLOCK,
@@ -335,6 +343,7 @@ pub static ALL: &[&MsgDef] = &[
     &QUATERNION,
     &POSE,
     &POSE_STAMPED,
+    &PATH,
     &VECTOR3,
     &TWIST,
     &CLOCK,

@@ -11,6 +11,7 @@
 //! | `/storage_<k>/pose` | geometry_msgs/PoseStamped | [`Profile::LatchedPose`] |
 //! | `/tending/markers` | visualization_msgs/MarkerArray | [`Profile::Visualization`] |
 //! | `/tending/metrics` | diagnostic_msgs/DiagnosticArray | [`Profile::Visualization`] |
+//! | `/tending/cells/c<i>_<j>` | nav_msgs/Path (one cell's entities, [`crate::cells`]) | [`Profile::Cell`] |
 
 use crate::qos::Profile;
 use crate::schema::{self, MsgDef};

@@ -141,6 +141,14 @@ impl PoseStamped {
     }
 }
 
+/// nav_msgs/msg/Path: here also one cell's state (docs/adr/0038-cell-topics.md): one pose
+/// per entity, named by its header's frame_id.
+#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
+pub struct Path {
+    pub header: Header,
+    pub poses: Vec<PoseStamped>,
+}
+
 /// geometry_msgs/msg/Vector3
 #[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
 pub struct Vector3 {

@@ -67,6 +67,12 @@ pub struct Params {
     /// What the robot observes of what it receives (`nearest_machines`, `nearest_storages`,
     /// `nearest_peers`; 0 or absent: everything, the paper's): the simulator's rule.
     pub observation: obs::Bound,
+    /// Read machines, storages and peers from the cell topics (`/tending/cells/c<i>_<j>`,
+    /// docs/adr/0038-cell-topics.md) of cells of this side, m, instead of every entity's
+    /// topics; 0: every entity's (the contract's default).
+    pub cell_size: f64,
+    /// Cell mode: how many cells around its own a robot reads (1: 3 x 3).
+    pub cell_reach: u32,
     /// Period of the counters log line.
     pub stats_period_s: f64,
     /// Period of topic discovery scans.
@@ -132,6 +138,8 @@ impl Default for Params {
             stale_timeout_s: 1.0,
             static_stale_timeout_s: 1.0,
             room_size: 2.0 * msgs::validate::ROOM_HALF_EXTENT,
+            cell_size: 0.0,
+            cell_reach: 1,
             room_margin: msgs::validate::DEFAULT_MARGIN,
             observation: obs::Bound::EVERYTHING,
             stats_period_s: 10.0,
@@ -157,6 +165,16 @@ impl Params {
     pub fn robot_id(&self) -> String {
         self.node.namespace.trim_matches('/').to_string()
     }
+
+    /// Cell mode's grid (`cell_size` > 0) over the room of `room_size`.
+    pub fn cell_grid(&self) -> Result<Option<msgs::cells::CellGrid>, ArgError> {
+        if self.cell_size <= 0.0 {
+            return Ok(None);
+        }
+        msgs::cells::CellGrid::new(self.room_size, self.cell_size)
+            .map(Some)
+            .map_err(|e| param_error("cell_size", e.to_string()))
+    }
 }
 
 pub const USAGE: &str = "usage: robot_node [--ros-args -r __ns:=/robot_N [-r __node:=NAME] \
@@ -167,7 +185,8 @@ parameters: policy (path), controller (greedy|greedy-orca|matching-orca|policy),
             use_sim_time (false), reach (= robot_radius),
             k_speed (0.5), prep_steps (20), stale_timeout_s (1.0), static_stale_timeout_s (= stale_timeout_s, <=0 off),
             room_size (2.3 m), room_margin (0.25), nearest_machines / nearest_storages /
-            nearest_peers (0: everything), stats_period_s (10), discovery_period_s (0.5),
+            nearest_peers (0: everything), cell_size (0: off; m, read the cell topics of ADR 0038
+            instead of every entity's), cell_reach (1: the 3 x 3 cells around), stats_period_s (10), discovery_period_s (0.5),
             robot_radius (0.08), machine_half_x/_y (0.12), storage_half_x (0.15), storage_half_y (0.08),
             lockstep (false; implies use_sim_time), lockstep_wait_s (0.5), lockstep_resend_s (0.5; 0 never),
             act_on_state (true: real time acts when a state is in), state_wait_s (0.03),
@@ -273,6 +292,18 @@ fn apply_param(p: &mut Params, name: &str, v: &ParamValue) -> Result<bool, ArgEr
         }
         "room_margin" => p.room_margin = non_negative(name, v)?,
         "room_size" => p.room_size = positive(name, v)?,
+        "cell_size" => p.cell_size = non_negative(name, v)?,
+        "cell_reach" => {
+            p.cell_reach = match v {
+                ParamValue::Int(i) if (1..=100).contains(i) => *i as u32,
+                other => {
+                    return Err(param_error(
+                        name,
+                        format!("expected a whole number of cells, 1 to 100, got {other:?}"),
+                    ))
+                }
+            }
+        }
         "nearest_machines" => p.observation.nearest_machines = nearest(name, v)?,
         "nearest_storages" => p.observation.nearest_storages = nearest(name, v)?,
         "nearest_peers" => p.observation.nearest_peers = nearest(name, v)?,

@@ -13,8 +13,9 @@ use ros2_client::log::LogLevel;
 use ros2_client::rosout;
 use tracing::{debug, info, warn};
 
+use msgs::cells::Cell;
 use msgs::topics::{self, Leaf};
-use msgs::{Bool, Clock, EntityTopic, PoseStamped, Profile};
+use msgs::{Bool, Clock, EntityTopic, Path, PoseStamped, Profile, RoomBounds};
 use ros::subscription;
 
 use crate::args::Params;
@@ -79,6 +80,7 @@ pub(crate) fn run(
         let t = l.now_s();
         l.drain(t);
         l.discover();
+        l.follow_cells();
         l.settle();
         if p.lockstep {
             l.lockstep();
@@ -128,6 +130,10 @@ struct EventLoop<'a> {
     settled: bool,
     own_seen_at: Option<Instant>,
     last_new_topic_at: Instant,
+    /// Cell mode: each hosted robot's cell and rings read when its cells were last
+    /// subscribed.
+    cell_of: Vec<Option<(Cell, u32)>>,
+    room: RoomBounds,
 }
 
 impl<'a> EventLoop<'a> {
@@ -176,7 +182,11 @@ impl<'a> EventLoop<'a> {
             settled: p.lockstep,
             own_seen_at: None,
             last_new_topic_at: t0,
+            cell_of: Vec::new(),
+            room: RoomBounds::default(),
         };
+        l.cell_of = vec![None; l.hosted.len()];
+        l.room = l.hosted[0].brain.world.cfg.room;
         wd.stage(NodeStage::Subscriptions);
         l.subscribe_own(stop)?;
         l.log_start();
@@ -227,18 +237,90 @@ impl<'a> EventLoop<'a> {
             Leaf::Pose => {
                 let mut s = subscription::<PoseStamped>(self.node, &name, profile)?;
                 registry.register(&mut s, token, Interest::READABLE)?;
-                SubKind::Pose(s)
+                SubKind::Pose(s, topic)
             }
             Leaf::HasPart | Leaf::PartReady => {
                 let mut s = subscription::<Bool>(self.node, &name, profile)?;
                 registry.register(&mut s, token, Interest::READABLE)?;
-                SubKind::Flag(s)
+                SubKind::Flag(s, topic)
             }
             Leaf::CmdVel => return Err(anyhow!("robot_node does not subscribe to cmd_vel")),
         };
         debug!("subscribed to {name}");
-        self.readers.subs.push(Sub { topic, kind });
+        self.readers.subs.push(Sub { name, kind });
         Ok(())
+    }
+
+    /// Cell mode: a reader on `cell`'s topic, registered with mio under its index.
+    fn add_cell_sub(&mut self, cell: Cell) -> anyhow::Result<()> {
+        let name = cell.ros_name();
+        let token = Token(self.readers.subs.len());
+        let mut s = subscription::<Path>(self.node, &name, Profile::Cell)?;
+        self.poll
+            .registry()
+            .register(&mut s, token, Interest::READABLE)?;
+        debug!("subscribed to {name}");
+        self.readers.subs.push(Sub {
+            name,
+            kind: SubKind::Cell(s, cell),
+        });
+        Ok(())
+    }
+
+    /// Cell mode: when a hosted robot enters another cell or widens its window, subscribe
+    /// to the cells around it not read yet (a cell's topic is transient local: its latest
+    /// state arrives at once), and close the readers of cells more than one ring outside
+    /// every hosted robot's window (one ring of slack: a robot on a cell border does not
+    /// churn).
+    fn follow_cells(&mut self) {
+        let mut moved = false;
+        for i in 0..self.hosted.len() {
+            let now_in = self.hosted[i].brain.world.own_cell();
+            if now_in.is_none() || now_in == self.cell_of[i] {
+                continue;
+            }
+            moved = true;
+            self.cell_of[i] = now_in;
+            for c in self.hosted[i].brain.world.cells_needed() {
+                if self.readers.cells.contains(&c) {
+                    continue;
+                }
+                match self.add_cell_sub(c) {
+                    Ok(()) => {
+                        self.readers.cells.insert(c);
+                        self.readers.leftover.push(self.readers.subs.len() - 1);
+                        self.last_new_topic_at = Instant::now();
+                        info!("subscribed to cell {}", c.ros_name());
+                    }
+                    Err(e) => {
+                        // retried when the robot next changes cell, or at the next scan
+                        warn!("cannot subscribe to {} (will retry): {e:#}", c.ros_name());
+                        self.cell_of[i] = None;
+                    }
+                }
+            }
+        }
+        if moved && self.cell_of.iter().all(Option::is_some) {
+            self.close_far_cells();
+        }
+    }
+
+    fn close_far_cells(&mut self) {
+        let windows: Vec<(Cell, u32)> = self.cell_of.iter().flatten().copied().collect();
+        for sub in self.readers.subs.iter_mut() {
+            let SubKind::Cell(_, c) = &sub.kind else {
+                continue;
+            };
+            let c = *c;
+            if windows.iter().any(|(w, r)| c.steps_to(w) <= r + 1) {
+                continue;
+            }
+            if let SubKind::Cell(mut s, _) = std::mem::replace(&mut sub.kind, SubKind::Closed) {
+                self.poll.registry().deregister(&mut s).ok();
+            }
+            self.readers.cells.remove(&c);
+            debug!("closed the reader of cell {}", c.ros_name());
+        }
     }
 
     fn log_start(&self) {
@@ -317,7 +399,13 @@ impl<'a> EventLoop<'a> {
             r.todo.dedup();
         }
         for &i in &r.todo {
-            if drain(&r.subs[i], &mut self.hosted, t, &mut r.drops_seen) {
+            if drain(
+                &r.subs[i],
+                &mut self.hosted,
+                &self.room,
+                t,
+                &mut r.drops_seen,
+            ) {
                 r.leftover.push(i);
             }
         }
@@ -341,6 +429,10 @@ impl<'a> EventLoop<'a> {
                 continue;
             };
             if topic.leaf == Leaf::CmdVel || self.readers.known.contains(&topic) {
+                continue;
+            }
+            if self.p.cell_size > 0.0 {
+                // cell mode: peers, machines and storages come from the cells
                 continue;
             }
             let expected = topic.msg_def().map(|m| m.dds_name());
@@ -379,7 +471,7 @@ impl<'a> EventLoop<'a> {
             }
         }
         for h in self.hosted.iter_mut() {
-            h.brain.counters.subscriptions = self.readers.subs.len() as u64;
+            h.brain.counters.subscriptions = self.readers.open() as u64;
         }
     }
 
@@ -587,7 +679,7 @@ impl<'a> EventLoop<'a> {
             total.add(&h.brain.counters);
         }
         if self.multi {
-            total.subscriptions = self.readers.subs.len() as u64;
+            total.subscriptions = self.readers.open() as u64;
             info!("final counters (all robots): {total}");
         }
         // give the reliable writers a moment to deliver the zero commands before teardown

@@ -9,10 +9,13 @@
 //!
 //! DDS-free and deterministic, like [`crate::world`].
 
+use std::sync::Arc;
 use std::time::Duration;
 
+use msgs::cells::Cell;
 use msgs::{EntityTopic, PoseStamped};
 
+use crate::cells::CellContent;
 use crate::tick::Brain;
 use crate::world::{Accepted, DropReason, WriterId};
 
@@ -54,8 +57,22 @@ pub fn deliver<'b>(
     sample: &Incoming<'_>,
     now: f64,
 ) -> Delivered {
+    deliver_sized(brains, topic, sample, 0, now)
+}
+
+/// [`deliver`] a sample of `bytes` CDR payload bytes (counted by the robots that take it).
+pub fn deliver_sized<'b>(
+    brains: impl IntoIterator<Item = &'b mut Brain>,
+    topic: &EntityTopic,
+    sample: &Incoming<'_>,
+    bytes: usize,
+    now: f64,
+) -> Delivered {
     let mut d = Delivered::default();
     for brain in brains {
+        if !brain.world.reads_topics_of(&topic.entity) {
+            continue; // cell mode: a fellow hosted robot is seen through the cells
+        }
         let res = match *sample {
             Incoming::Pose { msg, writer } => brain.world.on_pose_from(topic, msg, writer, now),
             Incoming::Flag {
@@ -70,6 +87,46 @@ pub fn deliver<'b>(
         match res {
             Ok(a) => {
                 brain.counters.accepted += 1;
+                brain.counters.accepted_bytes += bytes as u64;
+                d.accepted += 1;
+                if a == Accepted::NewWriter {
+                    brain.counters.writer_changes += 1;
+                    d.new_writer += 1;
+                }
+            }
+            Err(r) => {
+                brain.counters.drop(r);
+                d.dropped += 1;
+                d.reason.get_or_insert(r);
+            }
+        }
+    }
+    d
+}
+
+/// Hand one cell's state (cell mode, docs/adr/0038-cell-topics.md) to every hosted robot
+/// that reads or keeps that cell; robots farther away ignore it, uncounted. A malformed
+/// cell message is `content: Err(reason)`, dropped by every robot.
+pub fn deliver_cell<'b>(
+    brains: impl IntoIterator<Item = &'b mut Brain>,
+    cell: Cell,
+    content: &Result<Arc<CellContent>, DropReason>,
+    writer: WriterId,
+    now: f64,
+) -> Delivered {
+    let mut d = Delivered::default();
+    for brain in brains {
+        let res = match content {
+            Ok(c) => brain.world.on_cell(cell, c, writer, now),
+            Err(r) => Err(*r),
+        };
+        match res {
+            Ok(None) => {}
+            Ok(Some(a)) => {
+                brain.counters.accepted += 1;
+                if let Ok(c) = content {
+                    brain.counters.accepted_bytes += c.bytes as u64;
+                }
                 d.accepted += 1;
                 if a == Accepted::NewWriter {
                     brain.counters.writer_changes += 1;
@@ -119,6 +176,7 @@ mod tests {
                 static_stale_timeout_s: 1.0,
                 room: RoomBounds::default(),
                 bound: obs::Bound::EVERYTHING,
+                cells: None,
             },
         );
         let gp = crate::controller::tests::params(0.5);

@@ -74,6 +74,7 @@ pub(crate) fn host(
             margin: p.room_margin,
         },
         bound: p.observation,
+        cells: p.cell_grid()?.map(|g| (g, p.cell_reach)),
     };
     let mut hosted: Vec<Hosted> = Vec::with_capacity(robots.len());
     let placeholder = Instant::now(); // set when the loop starts

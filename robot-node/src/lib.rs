@@ -3,6 +3,7 @@
 //! - [`args`]: ROS 2 command-line conventions (`--ros-args`, `-r`, `-p`, `--params-file`),
 //!   `ROS_DOMAIN_ID`;
 //! - [`world`]: latest validated inputs with staleness, and the observation built from them;
+//! - [`cells`]: cell mode's part of the world: the cells around the robot (ADR 0038);
 //! - [`controller`]: the [`controller::Controller`] trait (seam for the learned policy),
 //!   the policy through `plan`'s pilot, and the scripted controllers (greedy, greedy-ORCA,
 //!   matching-ORCA);
@@ -16,6 +17,7 @@
 //!   and the start-up retry loop.
 
 pub mod args;
+pub mod cells;
 pub mod controller;
 mod event_loop;
 pub mod fanout;

@@ -217,6 +217,7 @@ mod tests {
                 static_stale_timeout_s: 1.0,
                 room: RoomBounds::default(),
                 bound: obs::Bound::EVERYTHING,
+                cells: None,
             },
         )
     }

@@ -11,8 +11,12 @@
 //! in which case the new writer takes the pin ([`Accepted::NewWriter`]).
 
 use std::collections::BTreeMap;
+use std::sync::Arc;
 
+use msgs::cells::{Cell, CellGrid};
 use msgs::{Entity, EntityTopic, Leaf, PoseStamped, RoomBounds};
+
+use crate::cells::{CellContent, CellView, Gathered};
 
 /// Identity of the DDS writer a sample came from: its 16-byte RTPS GUID (ros2-client's
 /// `MessageInfo::publisher_gid().to_bytes16()`).
@@ -79,6 +83,8 @@ pub enum DropReason {
 #[derive(Debug, Clone, Default, PartialEq, Eq)]
 pub struct Counters {
     pub accepted: u64,
+    /// CDR payload bytes of the samples accepted (traffic per robot, docs/bench/cells.md).
+    pub accepted_bytes: u64,
     pub dropped_decode: u64,
     pub dropped_non_finite: u64,
     pub dropped_out_of_room: u64,
@@ -161,6 +167,7 @@ impl Counters {
         self.zero_controller_error += o.zero_controller_error;
         self.zero_bad_output += o.zero_bad_output;
         self.publish_errors += o.publish_errors;
+        self.accepted_bytes += o.accepted_bytes;
         self.subscriptions += o.subscriptions;
         self.lockstep_wait_timeouts += o.lockstep_wait_timeouts;
         self.lockstep_resends += o.lockstep_resends;
@@ -173,6 +180,7 @@ impl Counters {
     pub fn to_json(&self) -> serde_json::Value {
         serde_json::json!({
             "accepted": self.accepted,
+            "accepted_bytes": self.accepted_bytes,
             "dropped": {
                 "decode": self.dropped_decode,
                 "non_finite": self.dropped_non_finite,
@@ -208,12 +216,13 @@ impl std::fmt::Display for Counters {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         write!(
             f,
-            "accepted={} dropped(decode={} non_finite={} out_of_room={} unexpected={} \
+            "accepted={} bytes={} dropped(decode={} non_finite={} out_of_room={} unexpected={} \
              foreign_writer={}) writer_changes={} ticks={} commands={} repeated_commands={} \
              peer_poses(used={} off_stamp={}) zero(own_stale={} discovering={} obs_invalid={} controller_error={} bad_output={}) \
              publish_errors={} subscriptions={} lockstep_wait_timeouts={} lockstep_resends={} \
              state_wait_timeouts={} ticks_missed={} tick_late_max_us={}",
             self.accepted,
+            self.accepted_bytes,
             self.dropped_decode,
             self.dropped_non_finite,
             self.dropped_out_of_room,
@@ -253,6 +262,9 @@ pub struct WorldModelConfig {
     /// What the robot observes of what it receives: everything, or the k nearest of each
     /// group by the simulator's rule (`obs::nearest`, docs/adr/0037).
     pub bound: obs::Bound,
+    /// Read the floor from cell topics (docs/adr/0038-cell-topics.md): the grid and how
+    /// many cells around its own the robot reads. None: every entity's topics.
+    pub cells: Option<(CellGrid, u32)>,
 }
 
 /// Latest data about self, machines, storages and peers.
@@ -265,19 +277,22 @@ pub struct World {
     machines: BTreeMap<u32, EntityState>,
     storages: BTreeMap<u32, EntityState>,
     peers: BTreeMap<PeerKey, EntityState>,
+    /// Cell mode: the cells around the robot (machines, storages and peers come from
+    /// there, not from the maps above).
+    cells: Option<CellView>,
 }
 
 /// Peers in natural order (`robot_2` before `robot_10`): the simulator's robot order when
 /// robots are named `robot_<spawn index>`, so observations match the simulator's exactly.
 #[derive(Debug, Clone, PartialEq, Eq, PartialOrd, Ord)]
-struct PeerKey {
+pub(crate) struct PeerKey {
     stem: String,
     index: Option<u64>,
     name: String,
 }
 
 impl PeerKey {
-    fn new(name: &str) -> Self {
+    pub(crate) fn new(name: &str) -> Self {
         let digits = name.len() - name.trim_end_matches(|c: char| c.is_ascii_digit()).len();
         let (stem, num) = name.split_at(name.len() - digits);
         Self {
@@ -334,7 +349,71 @@ impl World {
             machines: BTreeMap::new(),
             storages: BTreeMap::new(),
             peers: BTreeMap::new(),
+            cells: cfg.cells.map(|(g, reach)| CellView::new(g, reach)),
         }
+    }
+
+    /// Does this robot read `entity`'s own topics? Always, but in cell mode only its own
+    /// (another hosted robot's pose reaches it through the cells, like any peer's).
+    pub fn reads_topics_of(&self, entity: &Entity) -> bool {
+        self.cells.is_none() || matches!(entity, Entity::Robot(r) if *r == self.me)
+    }
+
+    /// Cell mode: the cell the robot is in (by its latest own pose) and how many rings of
+    /// cells around it it reads now.
+    pub fn own_cell(&self) -> Option<(Cell, u32)> {
+        match (&self.cells, self.own.pose) {
+            (Some(v), Some(p)) => Some((v.grid.cell_of(p.value), v.rings())),
+            _ => None,
+        }
+    }
+
+    /// Cell mode: the cells the robot reads now (none before its own pose arrived).
+    pub fn cells_needed(&self) -> Vec<Cell> {
+        match (&self.cells, self.own.pose) {
+            (Some(v), Some(p)) => v.needed(p.value).collect(),
+            _ => Vec::new(),
+        }
+    }
+
+    /// Cell mode: a cell's state arrived (validated already). `Ok(None)`: a cell too far
+    /// from this robot to keep; not counted.
+    pub fn on_cell(
+        &mut self,
+        cell: Cell,
+        content: &Arc<CellContent>,
+        writer: WriterId,
+        now: f64,
+    ) -> Result<Option<Accepted>, DropReason> {
+        let own = self.own.pose.map(|p| p.value);
+        let release = self.cfg.stale_timeout_s;
+        match self.cells.as_mut() {
+            Some(v) => v.on_cell(cell, content, writer, own, now, release),
+            None => Err(DropReason::Unexpected),
+        }
+    }
+
+    /// Cell mode: the observation from the cells around `own_pos`, each taken if `usable`.
+    fn observe_cells(
+        &self,
+        v: &CellView,
+        own_pos: [f64; 2],
+        has_part: bool,
+        usable: impl Fn(&Sample<Arc<CellContent>>) -> bool,
+    ) -> obs::ObsBuilder {
+        let Gathered {
+            machines,
+            storages,
+            peers,
+        } = v.gather(&self.me, own_pos, usable);
+        obs::ObsBuilder {
+            own_pos: [own_pos[0] as f32, own_pos[1] as f32],
+            has_part,
+            machines,
+            storages,
+            peers,
+        }
+        .bounded(&self.cfg.bound)
     }
 
     fn slot(&mut self, entity: &Entity) -> &mut EntityState {
@@ -461,6 +540,11 @@ impl World {
         let rt = self.cfg.stale_timeout_s;
         let st = self.cfg.static_stale_timeout_s;
         let (pos, has_part) = self.own_inputs(now)?;
+        if let Some(v) = &self.cells {
+            let fresh = |s: &Sample<Arc<CellContent>>| rt <= 0.0 || now - s.at <= rt;
+            v.settle_window(&self.me, pos, &self.cfg.bound, fresh);
+            return Ok(self.observe_cells(v, pos, has_part, fresh));
+        }
         let f = |p: [f64; 2]| [p[0] as f32, p[1] as f32];
         let machines = self
             .machines
@@ -507,6 +591,9 @@ impl World {
     /// for machines and peers a flag. Right after start-up, the world is not complete
     /// until this is 0.
     pub fn entities_without_data(&self) -> usize {
+        if let (Some(v), Some(p)) = (&self.cells, self.own.pose) {
+            return v.without_data(&self.me, p.value, &self.cfg.bound);
+        }
         self.each_entity()
             .filter(|(e, needs_flag)| Self::without_data(e, *needs_flag))
             .count()
@@ -515,6 +602,10 @@ impl World {
     /// Discovered machines and storages without data yet: boxes the robot could not see
     /// in its observation, nor its safety filter steer around.
     pub fn fixtures_without_data(&self) -> usize {
+        if self.cells.is_some() {
+            // a cell brings its machines and storages with it
+            return self.entities_without_data();
+        }
         let m = self
             .machines
             .values()
@@ -559,6 +650,9 @@ impl World {
         if !Self::complete_at(&self.own, true, stamp) {
             return None;
         }
+        if let (Some(v), Some(p)) = (&self.cells, self.own.pose) {
+            return Some(v.missing_at(&self.me, p.value, &self.cfg.bound, stamp));
+        }
         let (rt, st) = (self.cfg.stale_timeout_s, self.cfg.static_stale_timeout_s);
         let expected = |e: &EntityState, needs_flag: bool| match prev {
             Some(p) => {
@@ -589,6 +683,10 @@ impl World {
         if own_flag.stamp != Some(stamp) {
             return Err(OwnStale::HasPartStale);
         }
+        if let Some(v) = &self.cells {
+            let of_stamp = |s: &Sample<Arc<CellContent>>| s.stamp == Some(stamp);
+            return Ok(self.observe_cells(v, own_pose.value, own_flag.value, of_stamp));
+        }
         let f = |p: [f64; 2]| [p[0] as f32, p[1] as f32];
         let at = |s: &Option<Sample<[f64; 2]>>| s.filter(|p| p.stamp == Some(stamp));
         let flag_at = |s: &Option<Sample<bool>>| s.filter(|p| p.stamp == Some(stamp));
@@ -617,6 +715,12 @@ impl World {
     /// Fresh peer poses at `now`, and how many carry another stamp than `stamp`.
     pub fn peers_off_stamp(&self, stamp: i64, now: f64) -> (usize, usize) {
         let rt = self.cfg.stale_timeout_s;
+        if let (Some(v), Some(p)) = (&self.cells, self.own.pose) {
+            let fresh = |s: &Sample<Arc<CellContent>>| rt <= 0.0 || now - s.at <= rt;
+            let all = v.gather(&self.me, p.value, fresh).peers.len();
+            let on = v.gather(&self.me, p.value, |s| fresh(s) && s.stamp == Some(stamp));
+            return (all, all - on.peers.len());
+        }
         self.peers
             .values()
             .filter_map(|r| r.pose.filter(|p| rt <= 0.0 || now - p.at <= rt))
@@ -627,6 +731,10 @@ impl World {
 
     /// Known (ever seen) entity counts: machines, storages, peers.
     pub fn known(&self) -> (usize, usize, usize) {
+        if let (Some(v), Some(p)) = (&self.cells, self.own.pose) {
+            let g = v.gather(&self.me, p.value, |_| true);
+            return (g.machines.len(), g.storages.len(), g.peers.len());
+        }
         (self.machines.len(), self.storages.len(), self.peers.len())
     }
 }

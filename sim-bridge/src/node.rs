@@ -9,6 +9,7 @@ use ros2_client::dds::rustdds::mio1::{Events, Interest, Poll, Token};
 use ros2_client::dds::{Context, Node, Subscription};
 use tracing::{info, warn};
 
+use msgs::cells::CellGrid;
 use msgs::topics::{self, robot, Entity, Leaf};
 use msgs::{Profile, RosMessage, StdString, Twist};
 use ros::{stamp_key_info, subscription, RosNode};
@@ -149,7 +150,13 @@ impl<'a> Bridge<'a> {
         wd: &'a Watchdog,
     ) -> anyhow::Result<Self> {
         wd.stage(NodeStage::Endpoints);
-        let out = Outputs::new(node)?;
+        let grid = if p.cell_size > 0.0 {
+            let room = core.env.config().world.room_size as f64;
+            Some(CellGrid::new(room, p.cell_size).context("cell_size")?)
+        } else {
+            None
+        };
+        let out = Outputs::new(node, grid)?;
         let poll = Poll::new().context("mio poll")?;
         let mut command_sub: Subscription<StdString> =
             subscription(node, topics::COMMAND, Profile::RobotStream)?;
@@ -257,7 +264,7 @@ impl<'a> Bridge<'a> {
         if !send {
             return Ok(());
         }
-        let f = StateFrame::of(self.core);
+        let f = StateFrame::of(self.core, self.out.grid.as_ref());
         if self.state_q.is_active() {
             self.state_q.push(Instant::now(), f);
         } else {

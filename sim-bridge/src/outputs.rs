@@ -8,8 +8,9 @@ use std::collections::{BTreeMap, HashMap};
 use ros2_client::dds::{Context, Node, Publisher};
 use tracing::warn;
 
-use msgs::topics::{self, machine, robot, storage, Leaf};
-use msgs::{Bool, Clock, DiagnosticArray, MarkerArray, PoseStamped, Profile, RosMessage};
+use msgs::cells::{self, Cell, CellEntry, CellGrid};
+use msgs::topics::{self, machine, robot, storage, Entity, Leaf};
+use msgs::{Bool, Clock, DiagnosticArray, MarkerArray, Path, PoseStamped, Profile, RosMessage};
 use ros::{publisher, StampedWriter};
 
 use crate::core::Core;
@@ -28,6 +29,9 @@ pub(crate) struct StateFrame {
     robots: Vec<(String, PoseStamped, bool)>,
     machines: Vec<(u32, PoseStamped, bool)>,
     storages: Vec<(u32, PoseStamped)>,
+    /// Every cell's state (empty cells too: a robot waits for each cell around it), when
+    /// the bridge publishes cell topics.
+    cells: Vec<(Cell, Path)>,
     markers: MarkerArray,
     diag: DiagnosticArray,
     clock: Clock,
@@ -67,6 +71,9 @@ pub(crate) struct Outputs {
     robots: BTreeMap<String, EntityWriters>,
     machines: HashMap<u32, EntityWriters>,
     storages: HashMap<u32, EntityWriters>,
+    /// One writer per cell (`cell_size` > 0), created once: the floor does not change.
+    cells: BTreeMap<Cell, StampedWriter<Path>>,
+    pub(crate) grid: Option<CellGrid>,
 }
 
 /// A writer on an entity's topic.
@@ -80,8 +87,10 @@ fn entity_writer<M: RosMessage>(
 }
 
 impl Outputs {
-    pub(crate) fn new(node: &mut Node) -> anyhow::Result<Self> {
+    pub(crate) fn new(node: &mut Node, grid: Option<CellGrid>) -> anyhow::Result<Self> {
         Ok(Self {
+            cells: BTreeMap::new(),
+            grid,
             clock: publisher(node, topics::CLOCK, Profile::Clock)?,
             markers: publisher(node, topics::MARKERS, Profile::Visualization)?,
             metrics: publisher(node, topics::METRICS, Profile::Visualization)?,
@@ -99,6 +108,13 @@ impl Outputs {
         core: &Core,
         wd: &Watchdog,
     ) -> anyhow::Result<()> {
+        if let Some(g) = self.grid.filter(|_| self.cells.is_empty()) {
+            for c in g.all() {
+                wd.beat();
+                let w = StampedWriter::new(ctx, node, &c.ros_name(), Profile::Cell)?;
+                self.cells.insert(c, w);
+            }
+        }
         let states = core.robot_states();
         self.robots.retain(|n, _| states.iter().any(|s| &s.0 == n));
         for (name, _, _) in &states {
@@ -148,10 +164,21 @@ impl Outputs {
         Ok(())
     }
 
-    /// Publish a frame: entity topics, then markers, metrics and /clock last. An entity
+    /// Publish a frame: cells, entity topics, then markers, metrics and /clock last. An entity
     /// removed while its frame was held has no writer any more: skipped.
     pub(crate) fn send(&self, f: StateFrame, rec: &mut Option<Recorder>) {
         let ns = f.ns;
+        // cells first: a robot starts waiting for the cells around it when its own pose
+        // arrives, and a 1,000-robot frame's entity topics take a while to write
+        for (c, path) in f.cells {
+            let Some(w) = self.cells.get(&c) else {
+                continue;
+            };
+            if let Some(r) = rec.as_mut() {
+                r.put(&c.ros_name(), &path);
+            }
+            let _ = w.write(path, Some(ns));
+        }
         for (name, ps, has_part) in f.robots {
             let Some(w) = self.robots.get(&name) else {
                 continue;
@@ -206,14 +233,16 @@ impl Outputs {
 }
 
 impl StateFrame {
-    /// The current state of every entity, stamped with the core's sim time.
-    pub(crate) fn of(core: &Core) -> Self {
+    /// The current state of every entity, stamped with the core's sim time, and with
+    /// `grid` every cell's.
+    pub(crate) fn of(core: &Core, grid: Option<&CellGrid>) -> Self {
         let stamp = core.stamp();
         let ns = stamp.sec as i64 * 1_000_000_000 + stamp.nanosec as i64;
         let pose =
             |c: [f32; 2]| PoseStamped::planar(stamp, topics::FRAME_ID, c[0] as f64, c[1] as f64);
         StateFrame {
             ns,
+            cells: grid.map(|g| cell_states(core, g)).unwrap_or_default(),
             robots: core
                 .robot_states()
                 .into_iter()
@@ -234,4 +263,30 @@ impl StateFrame {
             clock: Clock { clock: stamp },
         }
     }
+}
+
+/// Every cell's state: robots in name order, then machines and storages by id (the order a
+/// robot sorts them into anyway).
+fn cell_states(core: &Core, g: &CellGrid) -> Vec<(Cell, Path)> {
+    let mut by_cell: BTreeMap<Cell, Vec<CellEntry>> = g.all().map(|c| (c, Vec::new())).collect();
+    let f = |c: [f32; 2]| [c[0] as f64, c[1] as f64];
+    let mut put = |entity: Entity, xy: [f64; 2], flag: bool| {
+        if let Some(v) = by_cell.get_mut(&g.cell_of(xy)) {
+            v.push(CellEntry { entity, xy, flag });
+        }
+    };
+    for (name, pos, has) in core.robot_states() {
+        put(Entity::Robot(name), f(pos), has);
+    }
+    for m in core.env.machines() {
+        put(Entity::Machine(m.id.0), f(m.centre), m.part_ready);
+    }
+    for s in core.env.storages() {
+        put(Entity::Storage(s.id.0), f(s.centre), false);
+    }
+    let stamp = core.stamp();
+    by_cell
+        .into_iter()
+        .map(|(c, e)| (c, cells::encode(stamp, &e)))
+        .collect()
 }

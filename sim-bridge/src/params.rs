@@ -24,7 +24,8 @@ parameters: setup (6.4_2), seed (0), mode (realtime|lockstep), rate_hz (10), sta
             /tending/command lines from stdin), test_cmd_delay_ms (0: fault injection, hold every
             received cmd_vel this long before the simulator sees it), startup_timeout_s (10),
             stall_timeout_s (10): watchdog, exit code 75 when start-up or the step loop makes no
-            progress that long (0 disables)
+            progress that long (0 disables), cell_size (0 = off: metres; also publish each cell's
+            state on /tending/cells/c<i>_<j>, docs/adr/0038-cell-topics.md)
 topics: /clock, /<robot>/pose, /<robot>/has_part, /machine_<j>/pose, /machine_<j>/part_ready,
         /storage_<k>/pose, /tending/markers, /tending/metrics; subscribes /<robot>/cmd_vel (discovered)
         and /tending/command (std_msgs/String: add_machine [x y] | remove_machine ID | add_storage [x y] |
@@ -93,6 +94,9 @@ pub struct BridgeParams {
     pub startup_timeout_s: f64,
     /// Watchdog: exit with code 75 when the step loop stalls this long (0: off).
     pub stall_timeout_s: f64,
+    /// Side of the square cells whose state is also published per cell
+    /// (`/tending/cells/c<i>_<j>`, docs/adr/0038-cell-topics.md); 0: no cell topics.
+    pub cell_size: f64,
 }
 
 impl Default for BridgeParams {
@@ -121,6 +125,7 @@ impl Default for BridgeParams {
             test_state_delay_ms: 0.0,
             startup_timeout_s: 10.0,
             stall_timeout_s: 10.0,
+            cell_size: 0.0,
         }
     }
 }
@@ -191,6 +196,7 @@ fn apply_param(p: &mut BridgeParams, n: &str, v: &ParamValue) -> Result<bool, Ar
         "startup_timeout_s" => p.startup_timeout_s = timeout_s(n, v)?,
         "stall_timeout_s" => p.stall_timeout_s = timeout_s(n, v)?,
         "settle_s" => p.settle_s = non_negative(n, v)?,
+        "cell_size" => p.cell_size = non_negative(n, v)?,
         "metrics_period_s" => p.metrics_period_s = positive(n, v)?,
         "discovery_period_s" => p.discovery_period_s = positive(n, v)?,
         "config" => p.config = optional_path(n, v, "path")?,
@@ -285,6 +291,7 @@ mod tests {
             "startup_timeout_s:=-1",
             "stall_timeout_s:=soon",
             "stall_timeout_s:=.inf",
+            "cell_size:=-1",
         ] {
             assert!(parse(["--ros-args", "-p", bad], None).is_err(), "{bad}");
         }

@@ -225,3 +225,31 @@ fn a_bounded_observation_on_a_grown_floor_reproduces_the_offline_episode() {
     }
     .assert_reproduces("matching-orca, grown floor, 3 nearest", &off);
 }
+
+/// The same floor read through cell topics (docs/adr/0038-cell-topics.md): each robot
+/// subscribes to the cells of 1 m around its own (4 x 4 on this floor), never to a peer's,
+/// machine's or storage's own topics, crosses cells as it drives and widens its window
+/// while its 3 nearest of a kind may lie outside (3 of the 4 storages often need the whole
+/// floor): the fleet still reproduces the offline episode exactly.
+#[test]
+fn cell_topics_on_a_grown_floor_reproduce_the_offline_episode() {
+    let setup = Setup::new(12, 8, 4);
+    let mut cfg = ScenarioConfig::default();
+    cfg.world.floor = sim::Floor::Grown;
+    cfg.observation = obs::Bound::nearest(3);
+    let (seed, steps) = (2, 200);
+    let off = offline_matching_orca_in(&cfg, setup, seed, steps);
+    let m = LockstepRun {
+        robot_params: &["controller:=matching-orca", "cell_size:=1.0"],
+        bridge_params: &["cell_size:=1.0"],
+        scenario: Some(&cfg),
+        ..LockstepRun::new(setup, seed, steps, test_domains::domain(6))
+    }
+    .run();
+    lockstep_common::assert_same(
+        "matching-orca, grown floor, 3 nearest, cells",
+        &off,
+        &m,
+        steps,
+    );
+}

@@ -106,6 +106,13 @@ pub struct FleetArgs {
     /// squared; on 2 cores 20 robots run as 4 processes of 5).
     #[arg(long)]
     pub robots_per_process: Option<usize>,
+    /// Cell topics (docs/adr/0038-cell-topics.md): the bridge also publishes each square
+    /// cell of this side (m) on `/tending/cells/c<i>_<j>`, and every robot reads the cells
+    /// around it instead of every entity's topics, so what a robot receives is bounded by
+    /// its neighbourhood. Use with `--nearest K` (an unbounded observation needs the whole
+    /// floor anyway). Default: off (every entity's topics, the contract's).
+    #[arg(long, value_parser = positive_metres)]
+    pub cell_size: Option<f64>,
     /// Extra `-p NAME:=VALUE` for every robot_node (repeatable; e.g. test_delay_ms:=50).
     #[arg(long = "robot-param")]
     pub robot_params: Vec<String>,
@@ -122,6 +129,13 @@ pub struct FleetArgs {
     /// and missing enclaves are added (needs its private/ca.key.pem).
     #[arg(long, requires = "secure")]
     pub keystore: Option<PathBuf>,
+}
+
+fn positive_metres(s: &str) -> std::result::Result<f64, String> {
+    match s.parse::<f64>() {
+        Ok(x) if x.is_finite() && x > 0.0 => Ok(x),
+        _ => Err(format!("expected a length in metres > 0, got {s:?}")),
+    }
 }
 
 /// A robot process (or the bridge) is given this long to start before its robots count in

@@ -323,6 +323,9 @@ impl Plan {
         if let Some(r) = &a.record {
             b.set("record", r.display().to_string());
         }
+        if let Some(c) = a.cell_size {
+            b.set("cell_size", c);
+        }
         if self.lockstep {
             b.set(
                 "max_steps",
@@ -367,6 +370,9 @@ impl Plan {
         }
         if let Some(p) = &a.policy {
             r.set("policy", p.display().to_string());
+        }
+        if let Some(c) = a.cell_size {
+            r.set("cell_size", c);
         }
         params::write(&self.params_file, b, r)
     }

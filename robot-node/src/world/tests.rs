@@ -11,6 +11,7 @@ fn cfg() -> WorldModelConfig {
         static_stale_timeout_s: 2.0,
         room: RoomBounds::default(),
         bound: obs::Bound::EVERYTHING,
+        cells: None,
     }
 }
 fn pose(x: f64, y: f64) -> PoseStamped {
