@@ -108,6 +108,11 @@ fn check_secure_domain(secure: bool, domain: u16) -> Result<()> {
     Ok(())
 }
 
+/// Lockstep fleets above this many robots get waits scaled with their size.
+const LOCKSTEP_SCALED_ABOVE: f64 = 100.0;
+/// ... this many seconds per robot (5 s at 1,000 robots).
+const LOCKSTEP_S_PER_ROBOT: f64 = 0.005;
+
 /// Everything fixed for the run: what to start and how.
 pub(super) struct Plan {
     pub(super) a: FleetArgs,
@@ -357,6 +362,18 @@ impl Plan {
             .set_f32("orca_obstacle_horizon", self.margins.obstacle_horizon);
         if self.lockstep {
             r.set("lockstep", true);
+            let n = self.setup.robots as f64;
+            if n > LOCKSTEP_SCALED_ABOVE {
+                // A lockstep step of a large fleet takes about 1-2.5 ms of wall time per
+                // robot on this 2-core machine (1,000 robots: 1-2.5 s). A robot that waits
+                // only the default 0.5 s for its inputs acts on an incomplete state (the
+                // episode diverges from the offline one), and answers resent every 0.5 s
+                // flood the bridge (15,000 per process in a 20-step 1,000-robot run). Both
+                // scale with the fleet; the bridge's step timeout stays above them.
+                let s = n * LOCKSTEP_S_PER_ROBOT;
+                r.set("lockstep_wait_s", s).set("lockstep_resend_s", s);
+                b.set("lockstep_timeout_s", 2.0 * s);
+            }
         }
         let o = self.cfg.observation;
         for (name, k) in [

@@ -427,3 +427,63 @@ def test_lockstep_stamps_are_readable_by_rclpy(tmp_path):
         codes = [p.terminate() for p in reversed(procs)]
         ros.close()
     assert codes == [0, 0], codes
+
+
+CELL_TOPIC = re.compile(r'^/tending/cells/c(\d+)_(\d+)$')
+
+
+def test_cell_topics_are_readable_by_rclpy(tmp_path):
+    """Cell topics (docs/adr/0038-cell-topics.md) read by a stranger's rclpy node written from
+    the contract: `cell_size:=1.0` on the 2.3 m room gives 3 x 3 cells, each a
+    nav_msgs/msg/Path (reliable, transient local, depth 1) whose poses name their entity in
+    header.frame_id and carry its flag in position.z. At one step every robot, machine and
+    storage is in exactly one cell, the one its position falls in."""
+    from nav_msgs.msg import Path
+
+    require_binary(SIM_BRIDGE)
+    d = next_domain_id()
+    ros = Ros(d, 'cells_test')
+    proc = Proc([SIM_BRIDGE, '--ros-args', '-p', 'setup:=6.4_2', '-p', 'seed:=3',
+                 '-p', 'cell_size:=1.0', '-p', 'startup_grace_s:=300',
+                 '-p', 'wait_for_robots:=false'], tmp_path / 'sim_bridge.log', child_env(d))
+    try:
+        def cells():
+            return {t: ty for t, ty in ros.node.get_topic_names_and_types()
+                    if CELL_TOPIC.match(t)}
+        ros.spin_until(lambda: len(cells()) == 9, DISCOVERY_TIMEOUT_S, '9 cell topics')
+        assert all(ty == ['nav_msgs/msg/Path'] for ty in cells().values()), cells()
+        inbox = {t: [] for t in cells()}
+        for t, msgs in inbox.items():
+            ros.node.create_subscription(Path, t, msgs.append, LATCHED)
+
+        def stamp(m):
+            return m.header.stamp.sec * 10**9 + m.header.stamp.nanosec
+
+        def common():
+            sets = [{stamp(m) for m in msgs} for msgs in inbox.values()]
+            return set.intersection(*sets) if all(sets) else set()
+        ros.spin_until(lambda: common(), DISCOVERY_TIMEOUT_S,
+                       'one step on every cell topic')
+        s = min(common())
+        seen = []
+        for t, msgs in inbox.items():
+            i, j = map(int, CELL_TOPIC.match(t).groups())
+            m = next(m for m in msgs if stamp(m) == s)
+            assert m.header.frame_id == 'map'
+            for p in m.poses:
+                name, pos = p.header.frame_id, p.pose.position
+                assert stamp(p) == s, (t, name)
+                assert pos.z in (0.0, 1.0), (t, name, pos.z)
+                if name.startswith('storage_'):
+                    assert pos.z == 0.0
+                for v, k in ((pos.x, i), (pos.y, j)):
+                    assert min(int((v + ROOM_HALF) // 1.0), 2) == max(k, 0), (t, name, v)
+                seen.append(name)
+        expected = ([f'robot_{i}' for i in range(N_ROBOTS)]
+                    + [f'machine_{j}' for j in range(N_MACHINES)]
+                    + [f'storage_{k}' for k in range(N_STORAGES)])
+        assert sorted(seen) == sorted(expected)
+    finally:
+        code = proc.terminate()
+        ros.close()
+        assert code == 0, f'sim_bridge exit code {code}; log:\n{proc.text()[-2000:]}'
