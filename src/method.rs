@@ -92,7 +92,8 @@ pub fn scripted(name: &str, margins: &Margins) -> Result<(Method, String)> {
 /// or `--no-orca-filter` says otherwise; a target-action policy says so in its label (its
 /// rows must not read as the paper's policy).
 pub fn checkpoint(path: &Path, f: &CheckpointFlags) -> Result<(Method, String)> {
-    let pol = Policy::load(path).with_context(|| format!("--checkpoint {}", path.display()))?;
+    // the loader's error names the file already ("checkpoint X: no such file")
+    let pol = Policy::load(path).context("--checkpoint")?;
     let deployment = Deployment::Offline {
         trained_with_filter: pol.trained_with_orca_filter(),
     };

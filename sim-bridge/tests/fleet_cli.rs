@@ -315,3 +315,67 @@ fn realtime_fleet_moves_robots_as_lockstep_does() {
     }
     let _ = std::fs::remove_dir_all(&base);
 }
+
+/// `tending fleet --cell-size` (docs/adr/0038-cell-topics.md) with robots grouped several
+/// per process: the bridge publishes and records the cell topics, every robot reads the
+/// cells around it and none of its peers', machines' or storages' own topics, and the
+/// lockstep run ends without a robot acting on an incomplete state.
+#[test]
+fn a_fleet_on_cell_topics_reads_cells_not_entities() {
+    let domain = test_domains::domain(6);
+    let dir = std::env::temp_dir().join(format!("tending-cells-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    let (bag_dir, logs) = (dir.join("bag"), dir.join("logs"));
+    let stdout = run_fleet(
+        &[
+            "--setup".as_ref(),
+            "12.8_4".as_ref(),
+            "--floor".as_ref(),
+            "grown".as_ref(),
+            "--nearest".as_ref(),
+            "3".as_ref(),
+            "--cell-size".as_ref(),
+            "1".as_ref(),
+            "--policy".as_ref(),
+            "matching-orca".as_ref(),
+            "--mode".as_ref(),
+            "lockstep".as_ref(),
+            "--duration".as_ref(),
+            "3".as_ref(),
+            "--robots-per-process".as_ref(),
+            "4".as_ref(),
+            "--record".as_ref(),
+            bag_dir.as_os_str(),
+            "--log-dir".as_ref(),
+            logs.as_os_str(),
+        ],
+        domain,
+    );
+    let m = final_metrics(&stdout);
+    assert_eq!(m["step"], 30, "{m}");
+    assert_eq!(m["lockstep_timeouts"], 0, "{m}");
+    let r = bag::BagReader::open(&bag_dir).unwrap();
+    let cells = r.decode_topic::<msgs::Path>("/tending/cells/c0_0").unwrap();
+    assert!(cells.len() >= 30, "{} cell samples recorded", cells.len());
+    let mut robot_logs = 0;
+    for e in std::fs::read_dir(&logs).unwrap() {
+        let p = e.unwrap().path();
+        let name = p.file_name().unwrap().to_string_lossy().to_string();
+        if !name.starts_with("robot_") {
+            continue;
+        }
+        robot_logs += 1;
+        let text = std::fs::read_to_string(&p).unwrap();
+        assert!(
+            text.contains("subscribed to cell /tending/cells/c"),
+            "{name}:\n{text}"
+        );
+        assert!(
+            !text.contains("discovered /"),
+            "{name} read an entity topic:\n{text}"
+        );
+        assert!(text.contains("lockstep_wait_timeouts=0"), "{name}:\n{text}");
+    }
+    assert_eq!(robot_logs, 3, "12 robots, 4 per process");
+    let _ = std::fs::remove_dir_all(&dir);
+}

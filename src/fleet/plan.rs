@@ -165,6 +165,16 @@ impl Plan {
             }
         }
         let cfg = a.scenario.load()?;
+        let o = cfg.observation;
+        let unbounded = [o.nearest_machines, o.nearest_storages, o.nearest_peers]
+            .iter()
+            .any(Option::is_none);
+        if a.cell_size.is_some() && unbounded {
+            eprintln!(
+                "fleet: warning: --cell-size without a bound on every group (--nearest K): a \
+                 robot that observes a whole group reads every cell (docs/adr/0038)"
+            );
+        }
         // The setup's room and body sizes, from the counts (no environment needed).
         let sizes = sim::layout::sizes_for(setup, &cfg);
         let room_size = sim::layout::room_for(setup, &cfg);
