@@ -14,12 +14,32 @@ pub use ros::args::{
 /// Default node name.
 pub const DEFAULT_NODE_NAME: &str = "robot_node";
 
-/// Everything the node is configured with.
+/// Everything the node is configured with, in the groups the node's parts take: the
+/// parameter names on the command line stay flat (`orca_clearance`, `lockstep_wait_s`, ...),
+/// as ROS 2 parameters are; [`apply_param`] puts each in its group.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Params {
     /// Namespace (e.g. `/robot_3`: this robot's identity), node name, domain, log level,
     /// `--enclave` (the DDS Security enclave, used when `ROS_SECURITY_ENABLE=true`).
     pub node: NodeArgs,
+    pub control: ControlParams,
+    pub filter: FilterParams,
+    pub geometry: Geometry,
+    pub perception: Perception,
+    pub lockstep: LockstepParams,
+    pub realtime: RealTimeParams,
+    pub watchdog: WatchdogParams,
+    pub stats: StatsParams,
+    /// Multi-robot mode: these robots (ids such as `robot_3`) in one process: one DDS
+    /// context, one node (in `namespace`), one reader per input topic fanned out to every
+    /// hosted robot, one `cmd_vel` writer and controller per robot, one event loop.
+    /// Empty: one robot, identified by the namespace.
+    pub robots: Vec<String>,
+}
+
+/// What drives the robot and at what rate.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ControlParams {
     /// Checkpoint of the learned policy; `None` = scripted greedy controller.
     pub policy: Option<PathBuf>,
     /// `greedy`, `greedy-orca`, `matching-orca` or `policy`; default: `policy` if a policy
@@ -30,132 +50,174 @@ pub struct Params {
     /// Pass the policy's velocity through ORCA as a safety filter (plan::orca); None: on,
     /// unless `shield` is (safety by default; `orca_filter:=false` for the raw policy).
     pub orca_filter: Option<bool>,
-    /// Peer clearance of that filter (a policy's, matching-ORCA's) at full speed, m
-    /// (`plan::orca::FILTER_CLEARANCE`); at rest it is the smaller of this and
-    /// `orca_rest_clearance` (ADR 0017, 0019).
-    pub orca_clearance: f64,
-    /// Peer clearance of that filter at rest, m (`plan::orca::FILTER_REST_CLEARANCE`, what
-    /// the policy is evaluated with; 0.035 is ADR 0017's more conservative margin).
-    pub orca_rest_clearance: f64,
-    /// That filter's horizon for boxes and walls, s (`plan::orca::FILTER_OBSTACLE_HORIZON`,
-    /// ADR 0030; greedy-orca keeps `plan::orca::OBSTACLE_HORIZON`).
-    pub orca_obstacle_horizon: f64,
-    /// A margins file (plan::margins, e.g. configs/margins/*.toml): its `[filter]` table
-    /// sets the three `orca_*` parameters above that are not given themselves.
-    pub margins: Option<PathBuf>,
-    /// Pick/place reach beyond the robot radius (greedy-orca stops within it); default:
-    /// `robot_radius` (the simulator's default reach equals its radius at every scale).
-    pub reach: Option<f64>,
-    pub control_rate_hz: f64,
-    pub use_sim_time: bool,
     /// Speed of one discrete action, m/s.
     pub k_speed: f64,
     /// Control periods a machine takes to make a part after a pick (the simulator's
     /// `task.prep_steps`): the planner times machines from their ready flag with it.
     pub prep_steps: u32,
+    /// Pick/place reach beyond the robot radius (greedy-orca stops within it); default:
+    /// `robot_radius` (the simulator's default reach equals its radius at every scale).
+    pub reach: Option<f64>,
+    /// `control_rate_hz`.
+    pub rate_hz: f64,
+    pub use_sim_time: bool,
+}
+
+/// The ORCA safety filter's margins (a policy's, matching-ORCA's): `orca_clearance`,
+/// `orca_rest_clearance`, `orca_obstacle_horizon`, or a `margins` file setting those not
+/// given (plan::margins, e.g. configs/margins/*.toml: its `[filter]` table).
+#[derive(Debug, Clone, PartialEq)]
+pub struct FilterParams {
+    /// Peer clearance at full speed, m (`plan::orca::FILTER_CLEARANCE`); at rest it is the
+    /// smaller of this and `rest_clearance` (ADR 0017, 0019).
+    pub clearance: f64,
+    /// Peer clearance at rest, m (`plan::orca::FILTER_REST_CLEARANCE`, what the policy is
+    /// evaluated with; 0.035 is ADR 0017's more conservative margin).
+    pub rest_clearance: f64,
+    /// Horizon for boxes and walls, s (`plan::orca::FILTER_OBSTACLE_HORIZON`, ADR 0030;
+    /// greedy-orca keeps `plan::orca::OBSTACLE_HORIZON`).
+    pub obstacle_horizon: f64,
+    /// `margins`: the file, already applied by [`parse`].
+    pub file: Option<PathBuf>,
+}
+
+/// The fleet's bodies and room (the launcher passes the simulator's values for the setup;
+/// defaults: the unscaled base sizes in the contract's 2.3 m room).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Geometry {
+    pub robot_radius: f64,
+    pub machine_half: [f64; 2],
+    pub storage_half: [f64; 2],
+    /// Side of the room, m: the planner's walls, and accepted positions are |x|,|y| <=
+    /// room_size / 2 + room_margin. A grown floor's (docs/adr/0037) from `tending fleet`.
+    pub room_size: f64,
+    pub room_margin: f64,
+}
+
+/// What the robot reads and observes, and when its data goes stale.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Perception {
+    /// `nearest_machines`, `nearest_storages`, `nearest_peers` (0 or absent: everything,
+    /// the paper's): the simulator's rule.
+    pub bound: obs::Bound,
+    /// Read machines, storages and peers from the cell topics (`/tending/cells/c<i>_<j>`,
+    /// docs/adr/0038-cell-topics.md) of cells of this side, m, instead of every entity's
+    /// topics; 0: every entity's (the contract's default).
+    pub cell_size: f64,
+    /// Cell mode: how many cells around its own a robot reads at least (1: 3 x 3).
+    pub cell_reach: u32,
     /// No sample from a robot (own or peer) for this long: stale.
     pub stale_timeout_s: f64,
     /// Staleness of machine and storage data (latched topics); <= 0 disables it.
     /// Default: `stale_timeout_s`.
     pub static_stale_timeout_s: f64,
-    /// Side of the room, m: the planner's walls, and accepted positions are |x|,|y| <=
-    /// room_size / 2 + room_margin. The contract's 2.3 m; a grown floor's (docs/adr/0037)
-    /// from `tending fleet`.
-    pub room_size: f64,
-    /// Accepted positions: |x|,|y| <= room_size / 2 + room_margin.
-    pub room_margin: f64,
-    /// What the robot observes of what it receives (`nearest_machines`, `nearest_storages`,
-    /// `nearest_peers`; 0 or absent: everything, the paper's): the simulator's rule.
-    pub observation: obs::Bound,
-    /// Read machines, storages and peers from the cell topics (`/tending/cells/c<i>_<j>`,
-    /// docs/adr/0038-cell-topics.md) of cells of this side, m, instead of every entity's
-    /// topics; 0: every entity's (the contract's default).
-    pub cell_size: f64,
-    /// Cell mode: how many cells around its own a robot reads (1: 3 x 3).
-    pub cell_reach: u32,
-    /// Period of the counters log line.
-    pub stats_period_s: f64,
     /// Period of topic discovery scans.
     pub discovery_period_s: f64,
-    /// Body sizes the greedy controller plans with (the fleet's; the launcher passes the
-    /// simulator's values for the setup). Defaults: the unscaled base sizes.
-    pub robot_radius: f64,
-    pub machine_half: [f64; 2],
-    pub storage_half: [f64; 2],
-    /// Lockstep with the sim bridge (docs/adr/0003-lockstep.md): act once per simulator
-    /// state, when own and all expected entity data of that state's stamp are in (or
-    /// after `lockstep_wait_s`), and tag cmd_vel with the state's stamp. Implies sim time.
-    pub lockstep: bool,
-    pub lockstep_wait_s: f64,
-    /// Lockstep: send the answer to a state again every this many seconds while the bridge
-    /// has not published the next one (0: never). An answer written before the DDS
-    /// Security key exchange with the bridge finished never reaches it (volatile QoS)
+}
+
+/// Lockstep with the sim bridge (docs/adr/0003-lockstep.md): act once per simulator state,
+/// when own and all expected entity data of that state's stamp are in (or after `wait_s`),
+/// and tag cmd_vel with the state's stamp. Implies sim time.
+#[derive(Debug, Clone, PartialEq)]
+pub struct LockstepParams {
+    /// `lockstep`.
+    pub enabled: bool,
+    /// `lockstep_wait_s`.
+    pub wait_s: f64,
+    /// `lockstep_resend_s`: send the answer to a state again every this many seconds while
+    /// the bridge has not published the next one (0: never). An answer written before the
+    /// DDS Security key exchange with the bridge finished never reaches it (volatile QoS)
     /// (docs/adr/0029-lockstep-resends.md).
-    pub lockstep_resend_s: f64,
-    /// Real time on the wall clock: act on each new state as soon as own data and every
-    /// expected entity of its stamp are in (or after `state_wait_s`), instead of at the
-    /// control timer's phase; the timer then only repeats the last command while no new
-    /// state comes (a heartbeat). A command computed at the timer's phase could use peer
-    /// poses of two different states and reach the bridge after its next step
+    pub resend_s: f64,
+}
+
+/// Real time on the wall clock.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RealTimeParams {
+    /// Act on each new state as soon as own data and every expected entity of its stamp
+    /// are in (or after `state_wait_s`), instead of at the control timer's phase; the
+    /// timer then only repeats the last command while no new state comes (a heartbeat)
     /// (docs/adr/0024-act-on-state.md).
     pub act_on_state: bool,
     pub state_wait_s: f64,
-    /// Also print the counters as one JSON object per line on stdout (every stats period
-    /// and on exit, with `"final": true`), for benchmarks and launchers.
-    pub stats_json: bool,
-    /// Multi-robot mode: these robots (ids such as `robot_3`) in one process: one DDS
-    /// context, one node (in `namespace`), one reader per input topic fanned out to every
-    /// hosted robot, one `cmd_vel` writer and controller per robot, one event loop.
-    /// Empty: one robot, identified by the namespace.
-    pub robots: Vec<String>,
-    /// Watchdog (docs/bench/ros.md): start-up (controller, DDS context, node, writers,
-    /// subscriptions) must make progress (a stage, an entity, a retry) at least this often
-    /// until the event loop runs, else the process exits with code 75 (`EX_TEMPFAIL`) for
-    /// the launcher to restart it; 0 disables.
+}
+
+/// Watchdog (docs/bench/ros.md): exit code 75 (`EX_TEMPFAIL`) for the launcher to restart
+/// the process; 0 disables either.
+#[derive(Debug, Clone, PartialEq)]
+pub struct WatchdogParams {
+    /// Start-up (controller, DDS context, node, writers, subscriptions) must make
+    /// progress (a stage, an entity, a retry) at least this often until the event loop runs.
     pub startup_timeout_s: f64,
-    /// Watchdog: the event loop must iterate at least this often once running (it wakes
-    /// every 100 ms at most), else exit code 75; 0 disables.
+    /// The event loop must iterate at least this often once running (it wakes every
+    /// 100 ms at most).
     pub stall_timeout_s: f64,
+}
+
+/// The counters' log line.
+#[derive(Debug, Clone, PartialEq)]
+pub struct StatsParams {
+    /// `stats_period_s`.
+    pub period_s: f64,
+    /// `stats_json`: also print the counters as one JSON object per line on stdout (every
+    /// stats period and on exit, with `"final": true`), for benchmarks and launchers.
+    pub json: bool,
 }
 
 impl Default for Params {
     fn default() -> Self {
         Self {
             node: NodeArgs::new(DEFAULT_NODE_NAME),
-            policy: None,
-            controller: plan::MethodName::Greedy,
-            shield: false,
-            orca_filter: None,
-            orca_clearance: plan::orca::FILTER_CLEARANCE as f64,
-            orca_rest_clearance: plan::orca::FILTER_REST_CLEARANCE as f64,
-            orca_obstacle_horizon: plan::orca::FILTER_OBSTACLE_HORIZON as f64,
-            margins: None,
-            reach: None,
-            control_rate_hz: 10.0,
-            use_sim_time: false,
-            k_speed: 0.5,
-            prep_steps: 20,
-            stale_timeout_s: 1.0,
-            static_stale_timeout_s: 1.0,
-            room_size: 2.0 * msgs::validate::ROOM_HALF_EXTENT,
-            cell_size: 0.0,
-            cell_reach: 1,
-            room_margin: msgs::validate::DEFAULT_MARGIN,
-            observation: obs::Bound::EVERYTHING,
-            stats_period_s: 10.0,
-            discovery_period_s: 0.5,
-            robot_radius: 0.08,
-            machine_half: [0.12, 0.12],
-            storage_half: [0.15, 0.08],
-            lockstep: false,
-            lockstep_wait_s: 0.5,
-            lockstep_resend_s: 0.5,
-            act_on_state: true,
-            state_wait_s: 0.03,
-            stats_json: false,
+            control: ControlParams {
+                policy: None,
+                controller: plan::MethodName::Greedy,
+                shield: false,
+                orca_filter: None,
+                k_speed: 0.5,
+                prep_steps: 20,
+                reach: None,
+                rate_hz: 10.0,
+                use_sim_time: false,
+            },
+            filter: FilterParams {
+                clearance: plan::orca::FILTER_CLEARANCE as f64,
+                rest_clearance: plan::orca::FILTER_REST_CLEARANCE as f64,
+                obstacle_horizon: plan::orca::FILTER_OBSTACLE_HORIZON as f64,
+                file: None,
+            },
+            geometry: Geometry {
+                robot_radius: 0.08,
+                machine_half: [0.12, 0.12],
+                storage_half: [0.15, 0.08],
+                room_size: 2.0 * msgs::validate::ROOM_HALF_EXTENT,
+                room_margin: msgs::validate::DEFAULT_MARGIN,
+            },
+            perception: Perception {
+                bound: obs::Bound::EVERYTHING,
+                cell_size: 0.0,
+                cell_reach: 1,
+                stale_timeout_s: 1.0,
+                static_stale_timeout_s: 1.0,
+                discovery_period_s: 0.5,
+            },
+            lockstep: LockstepParams {
+                enabled: false,
+                wait_s: 0.5,
+                resend_s: 0.5,
+            },
+            realtime: RealTimeParams {
+                act_on_state: true,
+                state_wait_s: 0.03,
+            },
+            watchdog: WatchdogParams {
+                startup_timeout_s: 10.0,
+                stall_timeout_s: 10.0,
+            },
+            stats: StatsParams {
+                period_s: 10.0,
+                json: false,
+            },
             robots: Vec::new(),
-            startup_timeout_s: 10.0,
-            stall_timeout_s: 10.0,
         }
     }
 }
@@ -168,10 +230,10 @@ impl Params {
 
     /// Cell mode's grid (`cell_size` > 0) over the room of `room_size`.
     pub fn cell_grid(&self) -> Result<Option<msgs::cells::CellGrid>, ArgError> {
-        if self.cell_size <= 0.0 {
+        if self.perception.cell_size <= 0.0 {
             return Ok(None);
         }
-        msgs::cells::CellGrid::new(self.room_size, self.cell_size)
+        msgs::cells::CellGrid::new(self.geometry.room_size, self.perception.cell_size)
             .map(Some)
             .map_err(|e| param_error("cell_size", e.to_string()))
     }
@@ -209,10 +271,10 @@ where
     let (mut p, set, warnings) =
         parse_params(args, ros_domain_id, DEFAULT_NODE_NAME, init, apply_param)?;
     let was_set = |n: &str| set.iter().any(|s| s == n);
-    if p.lockstep {
-        p.use_sim_time = true;
+    if p.lockstep.enabled {
+        p.control.use_sim_time = true;
     }
-    if let Some(f) = &p.margins {
+    if let Some(f) = &p.filter.file {
         let m = plan::Margins::load(f).map_err(|e| param_error("margins", e.to_string()))?;
         if !m.greedy_orca.is_default() {
             return Err(param_error(
@@ -223,16 +285,16 @@ where
         }
         let f = m.filter;
         for (name, v, field) in [
-            ("orca_clearance", f.clearance, &mut p.orca_clearance),
+            ("orca_clearance", f.clearance, &mut p.filter.clearance),
             (
                 "orca_rest_clearance",
                 f.rest_clearance,
-                &mut p.orca_rest_clearance,
+                &mut p.filter.rest_clearance,
             ),
             (
                 "orca_obstacle_horizon",
                 f.obstacle_horizon,
-                &mut p.orca_obstacle_horizon,
+                &mut p.filter.obstacle_horizon,
             ),
         ] {
             if !was_set(name) {
@@ -241,11 +303,11 @@ where
         }
     }
     if !was_set("static_stale_timeout_s") {
-        p.static_stale_timeout_s = p.stale_timeout_s;
+        p.perception.static_stale_timeout_s = p.perception.stale_timeout_s;
     }
     // a policy path selects the policy controller unless `controller` was given
-    if p.policy.is_some() && !was_set("controller") {
-        p.controller = plan::MethodName::Policy;
+    if p.control.policy.is_some() && !was_set("controller") {
+        p.control.controller = plan::MethodName::Policy;
     }
     Ok((p, warnings))
 }
@@ -253,11 +315,11 @@ where
 /// Set parameter `name`; false if it is not one of `robot_node`'s.
 fn apply_param(p: &mut Params, name: &str, v: &ParamValue) -> Result<bool, ArgError> {
     match name {
-        "policy" => p.policy = optional_path(name, v, "path")?,
+        "policy" => p.control.policy = optional_path(name, v, "path")?,
         "controller" => {
             let on_robot = plan::MethodName::ON_ROBOT;
             let expected = || format!("expected {}", plan::MethodName::list(&on_robot));
-            p.controller = match v {
+            p.control.controller = match v {
                 ParamValue::Str(s) => match s.parse::<plan::MethodName>() {
                     Ok(m) if on_robot.contains(&m) => m,
                     Ok(m) => {
@@ -271,30 +333,30 @@ fn apply_param(p: &mut Params, name: &str, v: &ParamValue) -> Result<bool, ArgEr
                 other => return Err(param_error(name, format!("{}, got {other:?}", expected()))),
             }
         }
-        "shield" => p.shield = boolean(name, v)?,
-        "orca_filter" => p.orca_filter = Some(boolean(name, v)?),
-        "reach" => p.reach = Some(positive(name, v)?),
-        "orca_clearance" => p.orca_clearance = positive(name, v)?,
-        "orca_rest_clearance" => p.orca_rest_clearance = positive(name, v)?,
-        "orca_obstacle_horizon" => p.orca_obstacle_horizon = positive(name, v)?,
-        "margins" => p.margins = optional_path(name, v, "path")?,
-        "control_rate_hz" => p.control_rate_hz = rate_hz(name, v)?,
-        "use_sim_time" => p.use_sim_time = boolean(name, v)?,
-        "k_speed" => p.k_speed = positive(name, v)?,
-        "prep_steps" => p.prep_steps = steps(name, v)?,
-        "stale_timeout_s" => p.stale_timeout_s = positive(name, v)?,
+        "shield" => p.control.shield = boolean(name, v)?,
+        "orca_filter" => p.control.orca_filter = Some(boolean(name, v)?),
+        "reach" => p.control.reach = Some(positive(name, v)?),
+        "orca_clearance" => p.filter.clearance = positive(name, v)?,
+        "orca_rest_clearance" => p.filter.rest_clearance = positive(name, v)?,
+        "orca_obstacle_horizon" => p.filter.obstacle_horizon = positive(name, v)?,
+        "margins" => p.filter.file = optional_path(name, v, "path")?,
+        "control_rate_hz" => p.control.rate_hz = rate_hz(name, v)?,
+        "use_sim_time" => p.control.use_sim_time = boolean(name, v)?,
+        "k_speed" => p.control.k_speed = positive(name, v)?,
+        "prep_steps" => p.control.prep_steps = steps(name, v)?,
+        "stale_timeout_s" => p.perception.stale_timeout_s = positive(name, v)?,
         "static_stale_timeout_s" => {
             let x = num(name, v)?;
             if !x.is_finite() {
                 return Err(param_error(name, "must be finite"));
             }
-            p.static_stale_timeout_s = x;
+            p.perception.static_stale_timeout_s = x;
         }
-        "room_margin" => p.room_margin = non_negative(name, v)?,
-        "room_size" => p.room_size = positive(name, v)?,
-        "cell_size" => p.cell_size = non_negative(name, v)?,
+        "room_margin" => p.geometry.room_margin = non_negative(name, v)?,
+        "room_size" => p.geometry.room_size = positive(name, v)?,
+        "cell_size" => p.perception.cell_size = non_negative(name, v)?,
         "cell_reach" => {
-            p.cell_reach = match v {
+            p.perception.cell_reach = match v {
                 ParamValue::Int(i) if (1..=100).contains(i) => *i as u32,
                 other => {
                     return Err(param_error(
@@ -304,25 +366,25 @@ fn apply_param(p: &mut Params, name: &str, v: &ParamValue) -> Result<bool, ArgEr
                 }
             }
         }
-        "nearest_machines" => p.observation.nearest_machines = nearest(name, v)?,
-        "nearest_storages" => p.observation.nearest_storages = nearest(name, v)?,
-        "nearest_peers" => p.observation.nearest_peers = nearest(name, v)?,
-        "stats_period_s" => p.stats_period_s = positive(name, v)?,
-        "robot_radius" => p.robot_radius = positive(name, v)?,
-        "machine_half_x" => p.machine_half[0] = positive(name, v)?,
-        "machine_half_y" => p.machine_half[1] = positive(name, v)?,
-        "storage_half_x" => p.storage_half[0] = positive(name, v)?,
-        "storage_half_y" => p.storage_half[1] = positive(name, v)?,
-        "lockstep_wait_s" => p.lockstep_wait_s = positive(name, v)?,
-        "lockstep_resend_s" => p.lockstep_resend_s = non_negative(name, v)?,
-        "lockstep" => p.lockstep = boolean(name, v)?,
-        "act_on_state" => p.act_on_state = boolean(name, v)?,
-        "state_wait_s" => p.state_wait_s = positive(name, v)?,
-        "discovery_period_s" => p.discovery_period_s = positive(name, v)?,
+        "nearest_machines" => p.perception.bound.nearest_machines = nearest(name, v)?,
+        "nearest_storages" => p.perception.bound.nearest_storages = nearest(name, v)?,
+        "nearest_peers" => p.perception.bound.nearest_peers = nearest(name, v)?,
+        "stats_period_s" => p.stats.period_s = positive(name, v)?,
+        "robot_radius" => p.geometry.robot_radius = positive(name, v)?,
+        "machine_half_x" => p.geometry.machine_half[0] = positive(name, v)?,
+        "machine_half_y" => p.geometry.machine_half[1] = positive(name, v)?,
+        "storage_half_x" => p.geometry.storage_half[0] = positive(name, v)?,
+        "storage_half_y" => p.geometry.storage_half[1] = positive(name, v)?,
+        "lockstep_wait_s" => p.lockstep.wait_s = positive(name, v)?,
+        "lockstep_resend_s" => p.lockstep.resend_s = non_negative(name, v)?,
+        "lockstep" => p.lockstep.enabled = boolean(name, v)?,
+        "act_on_state" => p.realtime.act_on_state = boolean(name, v)?,
+        "state_wait_s" => p.realtime.state_wait_s = positive(name, v)?,
+        "discovery_period_s" => p.perception.discovery_period_s = positive(name, v)?,
         "robots" => p.robots = parse_robots(name, v)?,
-        "startup_timeout_s" => p.startup_timeout_s = timeout_s(name, v)?,
-        "stall_timeout_s" => p.stall_timeout_s = timeout_s(name, v)?,
-        "stats_json" => p.stats_json = boolean(name, v)?,
+        "startup_timeout_s" => p.watchdog.startup_timeout_s = timeout_s(name, v)?,
+        "stall_timeout_s" => p.watchdog.stall_timeout_s = timeout_s(name, v)?,
+        "stats_json" => p.stats.json = boolean(name, v)?,
         _ => return Ok(false),
     }
     Ok(true)
@@ -428,7 +490,10 @@ mod tests {
     #[test]
     fn watchdog_timeouts() {
         let p = parse_ok(&[]);
-        assert_eq!((p.startup_timeout_s, p.stall_timeout_s), (10.0, 10.0));
+        assert_eq!(
+            (p.watchdog.startup_timeout_s, p.watchdog.stall_timeout_s),
+            (10.0, 10.0)
+        );
         let p = parse_ok(&[
             "--ros-args",
             "-p",
@@ -436,7 +501,10 @@ mod tests {
             "-p",
             "stall_timeout_s:=0",
         ]);
-        assert_eq!((p.startup_timeout_s, p.stall_timeout_s), (2.5, 0.0));
+        assert_eq!(
+            (p.watchdog.startup_timeout_s, p.watchdog.stall_timeout_s),
+            (2.5, 0.0)
+        );
         for (bad, name) in [
             ("startup_timeout_s:=-1", "startup_timeout_s"),
             ("startup_timeout_s:=soon", "startup_timeout_s"),
@@ -453,8 +521,12 @@ mod tests {
 
     #[test]
     fn stats_json_flag() {
-        assert!(!parse_ok(&[]).stats_json);
-        assert!(parse_ok(&["--ros-args", "-p", "stats_json:=true"]).stats_json);
+        assert!(!parse_ok(&[]).stats.json);
+        assert!(
+            parse_ok(&["--ros-args", "-p", "stats_json:=true"])
+                .stats
+                .json
+        );
         assert!(parse(["--ros-args", "-p", "stats_json:=3"], None).is_err());
     }
 
@@ -479,21 +551,21 @@ mod tests {
             "-p",
             "prep_steps:=30",
         ]);
-        assert_eq!(p.prep_steps, 30);
+        assert_eq!(p.control.prep_steps, 30);
         assert_eq!(p.node.namespace, "/robot_3");
         assert_eq!(p.robot_id(), "robot_3");
         assert_eq!(p.node.node_name, "brain");
         assert_eq!(p.node.fully_qualified_name(), "/robot_3/brain");
         assert_eq!(
-            p.policy.as_deref(),
+            p.control.policy.as_deref(),
             Some(std::path::Path::new("/tmp/p.safetensors"))
         );
-        assert_eq!(p.controller, plan::MethodName::Policy);
-        assert_eq!(p.control_rate_hz, 20.0);
-        assert!(p.use_sim_time);
-        assert_eq!(p.k_speed, 0.25);
-        assert_eq!(p.stale_timeout_s, 2.0);
-        assert_eq!(p.static_stale_timeout_s, 2.0);
+        assert_eq!(p.control.controller, plan::MethodName::Policy);
+        assert_eq!(p.control.rate_hz, 20.0);
+        assert!(p.control.use_sim_time);
+        assert_eq!(p.control.k_speed, 0.25);
+        assert_eq!(p.perception.stale_timeout_s, 2.0);
+        assert_eq!(p.perception.static_stale_timeout_s, 2.0);
     }
 
     #[test]
@@ -510,7 +582,7 @@ mod tests {
         ]);
         assert_eq!(p.node.namespace, "/r1");
         assert_eq!(p.node.log_level.as_deref(), Some("warn"));
-        assert_eq!(p.controller, plan::MethodName::Greedy);
+        assert_eq!(p.control.controller, plan::MethodName::Greedy);
         // remap aimed at another node is not ours
         let p = parse_ok(&["--ros-args", "-r", "other:__ns:=/x"]);
         assert_eq!(p.node.namespace, "/");
@@ -529,11 +601,11 @@ mod tests {
             "-p",
             "orca_obstacle_horizon:=0.3",
         ]);
-        assert_eq!(p.controller, plan::MethodName::GreedyOrca);
-        assert_eq!(p.reach, Some(0.05));
-        assert_eq!(p.orca_rest_clearance, 0.035);
-        assert_eq!(p.orca_obstacle_horizon, 0.3);
-        assert!(!p.shield);
+        assert_eq!(p.control.controller, plan::MethodName::GreedyOrca);
+        assert_eq!(p.control.reach, Some(0.05));
+        assert_eq!(p.filter.rest_clearance, 0.035);
+        assert_eq!(p.filter.obstacle_horizon, 0.3);
+        assert!(!p.control.shield);
         let p = parse_ok(&[
             "--ros-args",
             "-p",
@@ -541,8 +613,8 @@ mod tests {
             "-p",
             "shield:=true",
         ]);
-        assert_eq!(p.controller, plan::MethodName::Policy);
-        assert!(p.shield);
+        assert_eq!(p.control.controller, plan::MethodName::Policy);
+        assert!(p.control.shield);
         for bad in [
             "shield:=3",
             "reach:=-1",
@@ -619,7 +691,7 @@ mod tests {
     #[test]
     fn unknown_params_warn() {
         let (p, w) = parse(["--ros-args", "-p", "foo:=1", "-p", "k_speed:=1"], None).unwrap();
-        assert_eq!(p.k_speed, 1.0);
+        assert_eq!(p.control.k_speed, 1.0);
         assert_eq!(w.len(), 1);
         assert!(w[0].contains("foo"));
     }
@@ -705,14 +777,14 @@ robot_node:
         std::fs::write(&f, "[filter]\nclearance = 0.05\nobstacle_horizon = 0.3\n").unwrap();
         let m = format!("margins:={}", f.display());
         let p = parse_ok(&["--ros-args", "-p", &m, "-p", "orca_obstacle_horizon:=0.2"]);
-        assert_eq!(p.orca_clearance, 0.05f32 as f64);
+        assert_eq!(p.filter.clearance, 0.05f32 as f64);
         // the file leaves out the rest clearance, so the deployed one stays
         assert_eq!(
-            p.orca_rest_clearance,
+            p.filter.rest_clearance,
             plan::orca::FILTER_REST_CLEARANCE as f64
         );
         // a parameter given itself wins over the file
-        assert_eq!(p.orca_obstacle_horizon, 0.2);
+        assert_eq!(p.filter.obstacle_horizon, 0.2);
         std::fs::write(&f, "[filter]\nclearance = 0\n").unwrap();
         let e = parse(["--ros-args", "-p", m.as_str()], None)
             .unwrap_err()
@@ -741,11 +813,11 @@ robot_node:
         .unwrap();
         let fs = f.to_str().unwrap();
         let p = parse_ok(&["--ros-args", "--params-file", fs, "-p", "k_speed:=0.7"]);
-        assert_eq!(p.k_speed, 0.7);
-        assert_eq!(p.control_rate_hz, 5.0);
+        assert_eq!(p.control.k_speed, 0.7);
+        assert_eq!(p.control.rate_hz, 5.0);
         // order on the command line does not matter: -p wins
         let p = parse_ok(&["--ros-args", "-p", "k_speed:=0.7", "--params-file", fs]);
-        assert_eq!(p.k_speed, 0.7);
+        assert_eq!(p.control.k_speed, 0.7);
         std::fs::write(&f, "/**:\n  ros__parameters:\n    k_speed: nope\n").unwrap();
         let e = parse(["--ros-args", "--params-file", fs], None).unwrap_err();
         assert!(e.to_string().contains("k_speed"), "{e}");

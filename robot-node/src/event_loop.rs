@@ -82,12 +82,12 @@ pub(crate) fn run(
         l.discover();
         l.follow_cells();
         l.settle();
-        if p.lockstep {
+        if p.lockstep.enabled {
             l.lockstep();
         } else if l.clock_sub.is_some() {
             l.tick_sim_time();
         } else {
-            if p.act_on_state {
+            if p.realtime.act_on_state {
                 l.act_on_states();
             }
             l.tick_wall_clock();
@@ -152,7 +152,7 @@ impl<'a> EventLoop<'a> {
         let hosted = host(p, stop, ctx, node, robots, multi, wd)?;
         let log = node.logging_handle();
         let t0 = Instant::now();
-        let stats_period = Duration::from_secs_f64(p.stats_period_s);
+        let stats_period = Duration::from_secs_f64(p.stats.period_s);
         let mut l = EventLoop {
             p,
             ctx,
@@ -166,20 +166,20 @@ impl<'a> EventLoop<'a> {
             readers: Readers::default(),
             clock_sub: None,
             t0,
-            period: Duration::from_secs_f64(1.0 / p.control_rate_hz),
-            state_wait: Duration::from_secs_f64(if p.lockstep {
-                p.lockstep_wait_s
+            period: Duration::from_secs_f64(1.0 / p.control.rate_hz),
+            state_wait: Duration::from_secs_f64(if p.lockstep.enabled {
+                p.lockstep.wait_s
             } else {
-                p.state_wait_s
+                p.realtime.state_wait_s
             }),
-            lockstep_resend: Duration::from_secs_f64(p.lockstep_resend_s),
+            lockstep_resend: Duration::from_secs_f64(p.lockstep.resend_s),
             stats_period,
             next_discovery: t0,
             next_sweep: t0,
             next_stats: t0 + stats_period,
             sim_last_index: None,
             sim_last_t: f64::NEG_INFINITY,
-            settled: p.lockstep,
+            settled: p.lockstep.enabled,
             own_seen_at: None,
             last_new_topic_at: t0,
             cell_of: Vec::new(),
@@ -215,7 +215,7 @@ impl<'a> EventLoop<'a> {
             retry("own subscription", stop, wd, || self.add_sub(t.clone()))?;
             fanout::touch(self.hosted.iter_mut().map(|h| &mut h.brain), &t);
         }
-        if self.p.use_sim_time {
+        if self.p.control.use_sim_time {
             let mut s = subscription::<Clock>(self.node, topics::CLOCK, Profile::Clock)?;
             self.poll
                 .registry()
@@ -343,11 +343,11 @@ impl<'a> EventLoop<'a> {
             who,
             p.node.domain_id,
             self.hosted[0].brain.controller.name(),
-            p.control_rate_hz,
-            if p.use_sim_time { "sim time from /clock" } else { "wall clock" },
-            p.k_speed,
-            p.stale_timeout_s,
-            p.static_stale_timeout_s
+            p.control.rate_hz,
+            if p.control.use_sim_time { "sim time from /clock" } else { "wall clock" },
+            p.control.k_speed,
+            p.perception.stale_timeout_s,
+            p.perception.static_stale_timeout_s
         );
     }
 
@@ -417,7 +417,7 @@ impl<'a> EventLoop<'a> {
         if now < self.next_discovery {
             return;
         }
-        let period = Duration::from_secs_f64(self.p.discovery_period_s);
+        let period = Duration::from_secs_f64(self.p.perception.discovery_period_s);
         self.next_discovery = now
             + if self.settled {
                 period
@@ -431,7 +431,7 @@ impl<'a> EventLoop<'a> {
             if topic.leaf == Leaf::CmdVel || self.readers.known.contains(&topic) {
                 continue;
             }
-            if self.p.cell_size > 0.0 {
+            if self.p.perception.cell_size > 0.0 {
                 // cell mode: peers, machines and storages come from the cells
                 continue;
             }
@@ -544,7 +544,7 @@ impl<'a> EventLoop<'a> {
         let now = self.t0.elapsed().as_secs_f64();
         // three quarters of a period: the bridge's states at the control rate all count,
         // jitter included; a faster pose stream is thinned to the control rate
-        let min_gap_us = (0.75e6 / self.p.control_rate_hz) as i64;
+        let min_gap_us = (0.75e6 / self.p.control.rate_hz) as i64;
         for h in self.hosted.iter_mut() {
             if state_step(h, &self.log, self.state_wait, min_gap_us, now) {
                 // half a period of slack for the bridge's jitter before a repeat
@@ -587,7 +587,7 @@ impl<'a> EventLoop<'a> {
             self.sim_last_index = None;
         }
         self.sim_last_t = st;
-        let idx = (st * self.p.control_rate_hz + 1e-6).floor() as i64;
+        let idx = (st * self.p.control.rate_hz + 1e-6).floor() as i64;
         let skipped = match self.sim_last_index {
             Some(l) if idx > l + 1 => (idx - l - 1) as u64,
             _ => 0,
@@ -634,7 +634,7 @@ impl<'a> EventLoop<'a> {
             let t = self.t0.elapsed().as_secs_f64();
             if !self.settled {
                 hold(h);
-            } else if self.p.act_on_state {
+            } else if self.p.realtime.act_on_state {
                 heartbeat(h, &self.log, t);
             } else {
                 tick_now(h, &self.log, t);
@@ -655,7 +655,7 @@ impl<'a> EventLoop<'a> {
                 "counters {}: {} | known machines={m} storages={s} peers={r}",
                 h.me, h.brain.counters
             );
-            if self.p.stats_json {
+            if self.p.stats.json {
                 print_stats_json(&h.me, &h.brain.counters, self.t0, false);
             }
         }
@@ -673,7 +673,7 @@ impl<'a> EventLoop<'a> {
                 h.tag
             );
             info!("final counters {}: {}", h.me, h.brain.counters);
-            if self.p.stats_json {
+            if self.p.stats.json {
                 print_stats_json(&h.me, &h.brain.counters, self.t0, true);
             }
             total.add(&h.brain.counters);

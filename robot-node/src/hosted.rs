@@ -67,14 +67,14 @@ pub(crate) fn host(
     wd: &Watchdog,
 ) -> anyhow::Result<Vec<Hosted>> {
     let wcfg = WorldModelConfig {
-        stale_timeout_s: p.stale_timeout_s,
-        static_stale_timeout_s: p.static_stale_timeout_s,
+        stale_timeout_s: p.perception.stale_timeout_s,
+        static_stale_timeout_s: p.perception.static_stale_timeout_s,
         room: msgs::RoomBounds {
-            half_extent: p.room_size / 2.0,
-            margin: p.room_margin,
+            half_extent: p.geometry.room_size / 2.0,
+            margin: p.geometry.room_margin,
         },
-        bound: p.observation,
-        cells: p.cell_grid()?.map(|g| (g, p.cell_reach)),
+        bound: p.perception.bound,
+        cells: p.cell_grid()?.map(|g| (g, p.perception.cell_reach)),
     };
     let mut hosted: Vec<Hosted> = Vec::with_capacity(robots.len());
     let placeholder = Instant::now(); // set when the loop starts

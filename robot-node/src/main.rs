@@ -36,8 +36,8 @@ fn main() {
     // Exit with code 75 (EX_TEMPFAIL) when start-up or the control loop hangs, so that the
     // launcher restarts the node (the safety net under the fixed RustDDS deadlock, ADR 0005)
     let wd = Watchdog::new(Limits::from_secs(
-        params.startup_timeout_s,
-        params.stall_timeout_s,
+        params.watchdog.startup_timeout_s,
+        params.watchdog.stall_timeout_s,
     ));
     let watching = wd.spawn(|stuck| {
         eprintln!("robot_node: watchdog: {stuck}");

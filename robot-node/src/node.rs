@@ -18,7 +18,7 @@ use tracing::{info, warn};
 
 use ros::RosNode;
 
-use crate::args::Params;
+use crate::args::{ControlParams, FilterParams, Geometry, Params};
 use crate::controller::{
     Controller, GreedyController, GreedyOrcaController, MatchingOrcaController, PolicyController,
 };
@@ -34,19 +34,22 @@ use plan::{Deployment, FilterMargins, FleetParams, Safety};
 /// error naming the file and the problem); its k_speed comes from the checkpoint's
 /// training metadata when present, else from the `k_speed` parameter.
 pub fn make_controller(p: &Params) -> anyhow::Result<(Box<dyn Controller>, f64)> {
-    let fleet = fleet_params(p);
-    match p.controller {
+    let fleet = fleet_params(&p.geometry, &p.control);
+    match p.control.controller {
         MethodName::Greedy => Ok((
             Box::new(GreedyController::new(fleet.greedy_params())),
-            p.k_speed,
+            p.control.k_speed,
         )),
         MethodName::GreedyOrca => Ok((
             Box::new(GreedyOrcaController::new(fleet.orca_params())?),
-            p.k_speed,
+            p.control.k_speed,
         )),
         MethodName::MatchingOrca => Ok((
-            Box::new(MatchingOrcaController::new(&fleet, filter_margins(p))?),
-            p.k_speed,
+            Box::new(MatchingOrcaController::new(
+                &fleet,
+                filter_margins(&p.filter),
+            )?),
+            p.control.k_speed,
         )),
         MethodName::Policy => policy_controller(p, fleet),
         // refused when the parameter is read (args.rs); kept as an error, not a panic
@@ -59,15 +62,16 @@ pub fn make_controller(p: &Params) -> anyhow::Result<(Box<dyn Controller>, f64)>
 /// --orca-filter/--shield` reproduce offline).
 fn policy_controller(p: &Params, fleet: FleetParams) -> anyhow::Result<(Box<dyn Controller>, f64)> {
     let path = p
+        .control
         .policy
         .as_ref()
         .ok_or_else(|| anyhow!("controller `policy` needs a checkpoint: -p policy:=PATH"))?;
-    let (c, from_meta) = PolicyController::load(path, p.k_speed as f32)?;
+    let (c, from_meta) = PolicyController::load(path, p.control.k_speed as f32)?;
     let safety = Safety::choose(
-        p.shield,
-        p.orca_filter,
+        p.control.shield,
+        p.control.orca_filter,
         Deployment::Robot,
-        filter_margins(p),
+        filter_margins(&p.filter),
     );
     if safety.filter.is_some() {
         info!("policy commands pass through the ORCA safety filter");
@@ -98,27 +102,27 @@ fn policy_controller(p: &Params, fleet: FleetParams) -> anyhow::Result<(Box<dyn 
 /// What a robot knows about its fleet: sizes, speed, control period, machine timing, the
 /// room (`room_size`, the contract's 2.3 m unless a grown floor says otherwise), its reach and the default contact distance. The planner's
 /// parameter sets (greedy, ORCA, shield) come from it.
-pub fn fleet_params(p: &Params) -> FleetParams {
+pub fn fleet_params(g: &Geometry, c: &ControlParams) -> FleetParams {
     FleetParams {
-        robot_radius: p.robot_radius as f32,
-        machine_half: [p.machine_half[0] as f32, p.machine_half[1] as f32],
-        storage_half: [p.storage_half[0] as f32, p.storage_half[1] as f32],
-        k_speed: p.k_speed as f32,
-        dt: (1.0 / p.control_rate_hz) as f32,
-        prep_steps: p.prep_steps,
-        room_size: p.room_size as f32,
-        reach: p.reach.unwrap_or(p.robot_radius) as f32,
+        robot_radius: g.robot_radius as f32,
+        machine_half: [g.machine_half[0] as f32, g.machine_half[1] as f32],
+        storage_half: [g.storage_half[0] as f32, g.storage_half[1] as f32],
+        k_speed: c.k_speed as f32,
+        dt: (1.0 / c.rate_hz) as f32,
+        prep_steps: c.prep_steps,
+        room_size: g.room_size as f32,
+        reach: c.reach.unwrap_or(g.robot_radius) as f32,
         collision_distance: plan::fleet::DEFAULT_COLLISION_DISTANCE,
     }
 }
 
 /// The ORCA filter's margins behind a policy or matching-ORCA (`orca_clearance`,
 /// `orca_rest_clearance`, `orca_obstacle_horizon`).
-fn filter_margins(p: &Params) -> FilterMargins {
+fn filter_margins(f: &FilterParams) -> FilterMargins {
     FilterMargins {
-        clearance: p.orca_clearance as f32,
-        rest_clearance: p.orca_rest_clearance as f32,
-        obstacle_horizon: p.orca_obstacle_horizon as f32,
+        clearance: f.clearance as f32,
+        rest_clearance: f.rest_clearance as f32,
+        obstacle_horizon: f.obstacle_horizon as f32,
     }
 }
 
@@ -205,10 +209,14 @@ mod tests {
     /// side against the same defaults).
     #[test]
     fn default_parameters_are_the_default_fleet() {
-        let f = fleet_params(&Params::default());
+        let d = Params::default();
+        let f = fleet_params(&d.geometry, &d.control);
         assert_eq!(f, crate::controller::tests::fleet());
         assert_eq!(f.greedy_params(), plan::greedy::GreedyParams::default());
         assert_eq!(f.shield_params().margin, 0.015);
-        assert_eq!(filter_margins(&Params::default()), FilterMargins::DEPLOYED);
+        assert_eq!(
+            filter_margins(&Params::default().filter),
+            FilterMargins::DEPLOYED
+        );
     }
 }
