@@ -17,8 +17,11 @@ use rayon::prelude::*;
 use sim::{episode_seed, Env, Metrics, ScenarioConfig, Setup};
 
 /// What an offline episode runs: a scripted method or a checkpoint, described, not yet
-/// running (`run_episode` builds one stateful pilot or planner per robot from it). On the
-/// robot, robot_node's `Controller` trait is the running counterpart, one per robot.
+/// running (`run_episode` builds one stateful pilot or planner per robot from it and steps
+/// them over the whole batch: a learned actor's logits come batched). One robot at a time,
+/// the same code runs behind `plan::Controller` (the scripts in `plan::controller`, the
+/// policy in `policy::controller`), as robot_node runs it; the lockstep tests hold the two
+/// equal step for step.
 #[derive(Debug, Clone)]
 pub enum Method {
     /// A trained actor (argmax actions unless `sample`) through its pilot, behind the

@@ -16,8 +16,11 @@
 //! - [`pilot`]: actor output -> menu target -> planner -> ORCA filter or shield, the one
 //!   path a learned policy (or matching-ORCA) drives through, with the rule for when the
 //!   filter is on ([`Safety`]);
-//! - [`margins`]: the filter's and greedy-ORCA's margins as a named TOML file.
+//! - [`margins`]: the filter's and greedy-ORCA's margins as a named TOML file;
+//! - [`controller`]: the one controller trait of a robot (observation in, velocity out),
+//!   with the scripted controllers (the learned one is `policy::controller`).
 
+pub mod controller;
 pub mod detour;
 pub mod fleet;
 pub mod geom;
@@ -32,6 +35,7 @@ pub mod shield;
 pub mod storage_queue;
 pub mod targets;
 
+pub use controller::Controller;
 pub use fleet::FleetParams;
 pub use margins::{Margins, ScriptMargins};
 pub use method::MethodName;

@@ -12,6 +12,7 @@ pub mod actor;
 pub mod checkpoint;
 pub mod choice;
 pub mod config;
+pub mod controller;
 pub mod critic;
 pub mod encoder;
 pub mod error;
