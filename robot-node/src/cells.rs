@@ -16,7 +16,7 @@ use std::sync::Arc;
 use msgs::cells::{Cell, CellEntry, CellGrid};
 use msgs::Entity;
 
-use crate::world::{admit, Accepted, DropReason, PeerKey, Sample, WriterId};
+use crate::sample::{admit, Accepted, DropReason, PeerKey, Sample, WriterId};
 
 /// One decoded cell message: its step stamp and entities.
 #[derive(Debug, Clone, PartialEq)]

@@ -3,6 +3,7 @@
 //! - [`args`]: ROS 2 command-line conventions (`--ros-args`, `-r`, `-p`, `--params-file`),
 //!   `ROS_DOMAIN_ID`;
 //! - [`world`]: latest validated inputs with staleness, and the observation built from them;
+//! - [`sample`]: one received value, the writer-pin rule and drop reasons, shared by both;
 //! - [`cells`]: cell mode's part of the world: the cells around the robot (ADR 0038);
 //! - [`controller`]: the [`controller::Controller`] trait (seam for the learned policy),
 //!   the policy through `plan`'s pilot, and the scripted controllers (greedy, greedy-ORCA,
@@ -24,6 +25,7 @@ pub mod fanout;
 mod hosted;
 pub mod node;
 mod readers;
+pub mod sample;
 pub mod tick;
 pub mod watchdog;
 pub mod world;
