@@ -16,7 +16,7 @@ pub const DEFAULT_NODE_NAME: &str = "robot_node";
 
 /// Everything the node is configured with, in the groups the node's parts take: the
 /// parameter names on the command line stay flat (`orca_clearance`, `lockstep_wait_s`, ...),
-/// as ROS 2 parameters are; [`apply_param`] puts each in its group.
+/// as ROS 2 parameters are; `apply_param` puts each in its group.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Params {
     /// Namespace (e.g. `/robot_3`: this robot's identity), node name, domain, log level,
