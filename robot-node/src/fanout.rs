@@ -84,22 +84,7 @@ pub fn deliver_sized<'b>(
                 .on_flag_stamped(topic, value, stamp, writer, now),
             Incoming::Undecodable => Err(DropReason::Decode),
         };
-        match res {
-            Ok(a) => {
-                brain.counters.accepted += 1;
-                brain.counters.accepted_bytes += bytes as u64;
-                d.accepted += 1;
-                if a == Accepted::NewWriter {
-                    brain.counters.writer_changes += 1;
-                    d.new_writer += 1;
-                }
-            }
-            Err(r) => {
-                brain.counters.drop(r);
-                d.dropped += 1;
-                d.reason.get_or_insert(r);
-            }
-        }
+        d.count(brain, res, bytes);
     }
     d
 }
@@ -120,27 +105,36 @@ pub fn deliver_cell<'b>(
             Ok(c) => brain.world.on_cell(cell, c, writer, now),
             Err(r) => Err(*r),
         };
+        let bytes = content.as_ref().map_or(0, |c| c.bytes);
         match res {
-            Ok(None) => {}
-            Ok(Some(a)) => {
+            Ok(None) => {} // a cell this robot neither reads nor keeps
+            Ok(Some(a)) => d.count(brain, Ok(a), bytes),
+            Err(r) => d.count(brain, Err(r), bytes),
+        }
+    }
+    d
+}
+
+impl Delivered {
+    /// What one robot did with the sample (`bytes` of payload), in its counters and here.
+    fn count(&mut self, brain: &mut Brain, res: Result<Accepted, DropReason>, bytes: usize) {
+        match res {
+            Ok(a) => {
                 brain.counters.accepted += 1;
-                if let Ok(c) = content {
-                    brain.counters.accepted_bytes += c.bytes as u64;
-                }
-                d.accepted += 1;
+                brain.counters.accepted_bytes += bytes as u64;
+                self.accepted += 1;
                 if a == Accepted::NewWriter {
                     brain.counters.writer_changes += 1;
-                    d.new_writer += 1;
+                    self.new_writer += 1;
                 }
             }
             Err(r) => {
                 brain.counters.drop(r);
-                d.dropped += 1;
-                d.reason.get_or_insert(r);
+                self.dropped += 1;
+                self.reason.get_or_insert(r);
             }
         }
     }
-    d
 }
 
 /// A newly subscribed entity: every hosted robot expects its data (lockstep's first state).

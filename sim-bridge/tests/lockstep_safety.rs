@@ -192,15 +192,20 @@ fn matching_orca_fleet_in_lockstep_reproduces_the_offline_episode() {
     .assert_reproduces("matching-orca", &off);
 }
 
+/// 12.8_4 on a grown floor (docs/adr/0037), every robot observing its 3 nearest of each kind.
+fn grown_12_8_4_nearest_3() -> (Setup, ScenarioConfig) {
+    let mut cfg = ScenarioConfig::default();
+    cfg.world.floor = sim::Floor::Grown;
+    cfg.observation = obs::Bound::nearest(3);
+    (Setup::new(12, 8, 4), cfg)
+}
+
 /// On a grown floor (docs/adr/0037) with every robot observing only its 3 nearest
 /// machines, storages and peers, robot_node applies the simulator's selection rule to what
 /// it receives, in the room the bridge runs: the fleet reproduces the offline episode.
 #[test]
 fn a_bounded_observation_on_a_grown_floor_reproduces_the_offline_episode() {
-    let setup = Setup::new(12, 8, 4);
-    let mut cfg = ScenarioConfig::default();
-    cfg.world.floor = sim::Floor::Grown;
-    cfg.observation = obs::Bound::nearest(3);
+    let (setup, cfg) = grown_12_8_4_nearest_3();
     let (seed, steps) = (2, 200);
     let off = offline_matching_orca_in(&cfg, setup, seed, steps);
     let unbounded = offline_matching_orca_in(
@@ -233,10 +238,7 @@ fn a_bounded_observation_on_a_grown_floor_reproduces_the_offline_episode() {
 /// floor): the fleet still reproduces the offline episode exactly.
 #[test]
 fn cell_topics_on_a_grown_floor_reproduce_the_offline_episode() {
-    let setup = Setup::new(12, 8, 4);
-    let mut cfg = ScenarioConfig::default();
-    cfg.world.floor = sim::Floor::Grown;
-    cfg.observation = obs::Bound::nearest(3);
+    let (setup, cfg) = grown_12_8_4_nearest_3();
     let (seed, steps) = (2, 200);
     let off = offline_matching_orca_in(&cfg, setup, seed, steps);
     let m = LockstepRun {
