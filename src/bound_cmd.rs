@@ -15,7 +15,7 @@ pub struct BoundArgs {
     #[command(flatten)]
     pub runs: crate::eval_cmd::Runs,
     #[command(flatten)]
-    pub scenario: crate::scenario_args::ScenarioArgs,
+    pub scenario: sim::args::ScenarioArgs,
     /// Write the per-seed means as CSV here.
     #[arg(long)]
     pub out: Option<PathBuf>,

@@ -45,7 +45,7 @@ pub struct EvalArgs {
     #[arg(long)]
     pub margins: Option<PathBuf>,
     #[command(flatten)]
-    pub scenario: crate::scenario_args::ScenarioArgs,
+    pub scenario: sim::args::ScenarioArgs,
     /// Write results.md and results.csv into this directory.
     #[arg(long)]
     pub out: Option<PathBuf>,

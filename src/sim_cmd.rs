@@ -40,7 +40,7 @@ pub struct SimArgs {
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
     #[command(flatten)]
-    pub scenario: crate::scenario_args::ScenarioArgs,
+    pub scenario: sim::args::ScenarioArgs,
     /// Safety margins (TOML, plan::margins, e.g. configs/margins/*.toml); default: the
     /// deployed ones.
     #[arg(long)]

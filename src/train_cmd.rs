@@ -50,7 +50,7 @@ pub struct TrainArgs {
     #[arg(long)]
     pub config: Option<PathBuf>,
     #[command(flatten)]
-    pub scenario: crate::scenario_args::ScenarioArgs,
+    pub scenario: sim::args::ScenarioArgs,
     /// Continue the run in --out from its trainer state (config, seed, schedule restored;
     /// --setup/--episodes/--curriculum/--randomize, when given, replace the schedule).
     #[arg(long)]

@@ -21,6 +21,8 @@ mod config;
 mod entities;
 mod env;
 mod error;
+#[cfg(feature = "clap")]
+pub mod args;
 pub mod fork;
 mod grid;
 pub mod layout;

@@ -1,9 +1,9 @@
-//! The scenario flags every command that runs the simulator shares (`sim`, `eval`,
-//! `train`, `bound`): the TOML file, and the two settings a scale study changes most, the
-//! floor and the observation bound, as flags over the file's values.
+//! The scenario flags every command that runs the simulator shares (`tending sim`, `eval`,
+//! `train`, `bound`, `fleet`): the TOML file, and the two settings a scale study changes
+//! most, the floor and the observation bound, as flags over the file's values. Behind the
+//! `clap` feature: the simulator itself needs no command line.
 
-use anyhow::Result;
-use sim::{Floor, ScenarioConfig};
+use crate::{Floor, ScenarioConfig, SimError};
 use std::path::PathBuf;
 
 #[derive(clap::Args, Debug, Clone, Default)]
@@ -30,7 +30,7 @@ pub enum FloorArg {
 
 impl ScenarioArgs {
     /// The scenario file (or the defaults) with the flags applied.
-    pub fn load(&self) -> Result<ScenarioConfig> {
+    pub fn load(&self) -> Result<ScenarioConfig, SimError> {
         let mut cfg = match &self.scenario {
             Some(p) => ScenarioConfig::load(p)?,
             None => ScenarioConfig::default(),
@@ -42,7 +42,12 @@ impl ScenarioArgs {
             };
         }
         if let Some(k) = self.nearest {
-            anyhow::ensure!(k >= 1, "--nearest must be at least 1, got {k}");
+            if k < 1 {
+                return Err(SimError::BadConfig {
+                    field: "--nearest".into(),
+                    reason: format!("must be at least 1, got {k}"),
+                });
+            }
             cfg.observation = obs::Bound::nearest(k);
         }
         cfg.validate()?;

@@ -73,7 +73,7 @@ pub struct FleetArgs {
     pub domain_check: Option<f64>,
     /// The scenario (TOML file, floor, observation bound) for the bridge and every robot.
     #[command(flatten)]
-    pub scenario: crate::scenario_args::ScenarioArgs,
+    pub scenario: sim::args::ScenarioArgs,
     /// Safety margins (TOML, plan::margins, e.g. configs/margins/*.toml): the ORCA
     /// filter's go to every robot_node (orca_clearance, orca_rest_clearance,
     /// orca_obstacle_horizon in the fleet's parameters file); default: the deployed ones.
