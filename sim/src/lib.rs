@@ -16,13 +16,13 @@
 #![allow(clippy::needless_range_loop)]
 
 mod action;
+#[cfg(feature = "clap")]
+pub mod args;
 mod bound;
 mod config;
 mod entities;
 mod env;
 mod error;
-#[cfg(feature = "clap")]
-pub mod args;
 pub mod fork;
 mod grid;
 pub mod layout;
