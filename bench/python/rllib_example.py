@@ -416,17 +416,19 @@ def plot(path, out):
     import matplotlib.pyplot as plt
 
     rows = out["iterations"]
-    x = [r["env_steps_lifetime"] for r in rows]
+    x = [r["env_steps_lifetime"] / 1000 for r in rows]
     fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(10, 3.6))
     ax1.plot(x, [r["episode_return_mean"] for r in rows])
-    ax1.set(xlabel="env steps", ylabel="episode return (mean, team)", title="return")
+    ax1.set(xlabel="env steps (thousands)", ylabel="episode return (mean, team)", title="return")
     ax2.plot(x, [r["parts_delivered_mean"] for r in rows], label="PPO (RLlib), training episodes")
-    ev = [(r["env_steps_lifetime"], r["eval_parts"]) for r in rows if r.get("eval_parts") is not None]
+    ev = [(r["env_steps_lifetime"] / 1000, r["eval_parts"]) for r in rows
+          if r.get("eval_parts") is not None]
     if ev:
         ax2.plot(*zip(*ev), "o-", ms=3, label="exported policy, tending eval (argmax)")
     for name, style in [("random", ":"), ("greedy", "--")]:
         ax2.axhline(out["eval"][name]["parts_delivered"], ls=style, c="grey", label=name)
-    ax2.set(xlabel="env steps", ylabel="parts delivered per episode", title="parts delivered")
+    ax2.set(xlabel="env steps (thousands)", ylabel="parts delivered per episode",
+            title="parts delivered")
     ax2.legend(fontsize=8)
     fig.suptitle(f"RLlib PPO, shared policy, {out['setup']}", fontsize=10)
     fig.tight_layout()
