@@ -348,6 +348,11 @@ def export_policy(algo_or_module, path: str | os.PathLike, module_id: str = MODU
 
 def export_trainer_state(algo_or_module, path: str | os.PathLike, module_id: str = MODULE_ID,
                          extra: Any = None) -> None:
-    """Write actor and critic as a ``tending-trainer-state`` (Adam moments zero)."""
+    """Write actor and critic as a ``tending-trainer-state`` (Adam moments zero). With
+    ValueNorm the critic's output is a normalised value: the statistics go into ``extra``
+    (``"rllib_valuenorm"``: running mean, mean of squares, debiasing term, beta), unless
+    ``extra`` is given."""
     m = _module(algo_or_module, module_id)
+    if extra is None and getattr(m, "value_norm", False):
+        extra = {"rllib_valuenorm": [float(x) for x in m.vn_stats.tolist()] + [m.VN_BETA]}
     st.save_trainer_state(path, m.actor, m.critic, extra=extra)
