@@ -41,7 +41,8 @@ fn sibling(name: &str) -> Result<PathBuf> {
 
 /// The checkpoint shipped in the repository (the README's main job runs it).
 pub(super) fn bundled_policy() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("policy/pretrained/smappo_6.4_2.safetensors")
+    // this crate sits one level below the repository root, beside `policy/`
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("../policy/pretrained/smappo_6.4_2.safetensors")
 }
 
 /// `--policy` as given: a script's name (`plan::MethodName`) is that robot_node controller
@@ -477,7 +478,19 @@ impl Plan {
 
 #[cfg(test)]
 mod tests {
-    use super::{check_secure_domain, check_timeouts};
+    use super::{bundled_policy, check_secure_domain, check_timeouts, resolve_policy};
+    use plan::MethodName;
+
+    /// The default fleet runs the bundled policy: its path resolves in a checkout (moving
+    /// this crate once pointed it at a file that is not there, and the fleet fell back to
+    /// greedy).
+    #[test]
+    fn the_default_fleet_runs_the_bundled_policy() {
+        assert!(bundled_policy().is_file(), "{}", bundled_policy().display());
+        let (controller, path) = resolve_policy(None).unwrap();
+        assert_eq!(controller, MethodName::Policy);
+        assert_eq!(path, Some(bundled_policy()));
+    }
 
     #[test]
     fn a_secure_fleet_is_refused_above_domain_230_with_the_reason() {
