@@ -6,10 +6,9 @@ torchrl 0.11, benchmarl 1.5.2) is not installed by CI: skipped, saying so, witho
 networks' stepping itself is tested without BenchMARL in test_flat_recurrent.py.
 """
 
-import csv
-import subprocess
 
 import pytest
+from conftest import rust_eval_row
 
 torch = pytest.importorskip(
     "torch", reason="torch is not installed (an optional extra): tending.benchmarl_rust needs it")
@@ -55,10 +54,4 @@ def test_mappo_iteration_exports_a_checkpoint_tending_eval_runs(tmp_path, tendin
     back = st.Actor.load(path)
     for k, v in actor.state_dict().items():
         assert torch.equal(v, back.state_dict()[k]), k
-    out = tmp_path / "eval"
-    p = subprocess.run([tending_bin, "eval", "--checkpoint", str(path), "--setups", "6.4_2", "--seeds", "0",
-                        "--episodes", "1", "--no-orca-filter", "--out", str(out)],
-                       capture_output=True, text=True, timeout=600)
-    assert p.returncode == 0, p.stderr
-    with open(out / "results.csv", newline="") as fh:
-        assert next(csv.DictReader(fh))["policy"]
+    assert rust_eval_row(tending_bin, path, tmp_path)["policy"]

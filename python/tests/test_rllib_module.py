@@ -6,12 +6,11 @@ Ray-cluster run's job (issue 48). ray[rllib] and torch are not installed by CI: 
 skip, saying so, when either is absent.
 """
 
-import csv
-import subprocess
 from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import rust_eval_row
 
 torch = pytest.importorskip(
     "torch", reason="torch is not installed (an optional extra): tending.rllib needs it")
@@ -128,13 +127,7 @@ def test_ppo_iteration_exports_a_checkpoint_tending_eval_runs(tmp_path, tending_
         assert torch.equal(v, back.state_dict()[k]), k
     st.Critic.load(state)
     # the Rust evaluation of the exported file equals the torch-side one
-    out = tmp_path / "eval"
-    p = subprocess.run([tending_bin, "eval", "--checkpoint", str(path), "--setups", "6.4_2", "--seeds", "0",
-                        "--episodes", "1", "--no-orca-filter", "--out", str(out)],
-                       capture_output=True, text=True, timeout=600)
-    assert p.returncode == 0, p.stderr
-    with open(out / "results.csv", newline="") as fh:
-        row = next(csv.DictReader(fh))
+    row = rust_eval_row(tending_bin, path, tmp_path)
     env = tending.parallel_env("6.4_2", seed=0)
     env.reset(seed=0)
     h = None
