@@ -16,6 +16,9 @@ pub struct Numbers {
     pub collisions_robot_machine: f64,
     pub collisions_robot_storage: f64,
     pub collisions_robot_wall: f64,
+    /// Collision events (onsets: a robot starting to touch something), the paper's
+    /// "collisions" read as events; a push held for 30 steps is one event, 30 contacts.
+    pub collision_events: f64,
     /// collisions / (robots x steps): how often a robot touches something.
     pub contacts_per_robot_step: f64,
     /// robot-robot collisions / (robots x steps).
@@ -35,6 +38,7 @@ impl Numbers {
             collisions_robot_machine: m.collisions_robot_machine as f64,
             collisions_robot_storage: m.collisions_robot_storage as f64,
             collisions_robot_wall: m.collisions_robot_wall as f64,
+            collision_events: m.collision_events as f64,
             contacts_per_robot_step: m.collisions as f64 / robot_steps,
             robot_robot_per_robot_step: m.collisions_robot_robot as f64 / robot_steps,
             mu: m.utilization(),
@@ -54,7 +58,7 @@ impl Numbers {
         out
     }
 
-    fn fields(&self) -> [f64; 10] {
+    fn fields(&self) -> [f64; 11] {
         [
             self.parts_delivered,
             self.collisions,
@@ -62,6 +66,7 @@ impl Numbers {
             self.collisions_robot_machine,
             self.collisions_robot_storage,
             self.collisions_robot_wall,
+            self.collision_events,
             self.contacts_per_robot_step,
             self.robot_robot_per_robot_step,
             self.mu,
@@ -69,7 +74,7 @@ impl Numbers {
         ]
     }
 
-    fn fields_mut(&mut self) -> [&mut f64; 10] {
+    fn fields_mut(&mut self) -> [&mut f64; 11] {
         [
             &mut self.parts_delivered,
             &mut self.collisions,
@@ -77,6 +82,7 @@ impl Numbers {
             &mut self.collisions_robot_machine,
             &mut self.collisions_robot_storage,
             &mut self.collisions_robot_wall,
+            &mut self.collision_events,
             &mut self.contacts_per_robot_step,
             &mut self.robot_robot_per_robot_step,
             &mut self.mu,
@@ -86,13 +92,14 @@ impl Numbers {
 }
 
 /// Markdown column names matching [`cells`].
-pub const COLUMNS: [&str; 10] = [
+pub const COLUMNS: [&str; 11] = [
     "parts delivered",
     "contacts",
     "robot-robot",
     "robot-machine",
     "robot-storage",
     "robot-wall",
+    "collision events",
     "contacts / robot-step",
     "robot-robot / robot-step",
     "MU",
@@ -109,6 +116,7 @@ pub fn cells(xs: &[Numbers]) -> Vec<String> {
         fmt_ms(&col(&|n| n.collisions_robot_machine), 1),
         fmt_ms(&col(&|n| n.collisions_robot_storage), 1),
         fmt_ms(&col(&|n| n.collisions_robot_wall), 1),
+        fmt_ms(&col(&|n| n.collision_events), 1),
         fmt_ms(&col(&|n| n.contacts_per_robot_step), 4),
         fmt_ms(&col(&|n| n.robot_robot_per_robot_step), 4),
         fmt_ms(&col(&|n| n.mu), 2),
@@ -129,6 +137,7 @@ mod tests {
             collisions_robot_machine: 3,
             collisions_robot_storage: 2,
             collisions_robot_wall: 1,
+            collision_events: 2,
             p_max: 8,
             total_reward: 1.5,
             steps: 200,
@@ -146,6 +155,7 @@ mod tests {
             + n.collisions_robot_storage
             + n.collisions_robot_wall;
         assert_eq!(kinds, n.collisions);
+        assert_eq!(n.collision_events, 2.0);
     }
 
     #[test]

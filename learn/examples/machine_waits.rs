@@ -21,7 +21,8 @@
 //!
 //! cargo run --release -p learn --example machine_waits -- CHECKPOINT|greedy-orca SETUP [EPISODES] [SEED]
 //! (`TRACE=1`: each late cycle's matched robot and its distance in steps, step by step, `s`
-//! where it did not move; `SCENE=EPISODE,ROBOT,FROM,TO`: that robot's surroundings)
+//! where it did not move; `SCENE=EPISODE,ROBOT,FROM,TO`: that robot's surroundings;
+//! `FLOOR=grown`, `NEAREST=K`: a grown floor, the K nearest observed, docs/adr/0037)
 
 use learn::eval::{run_episode_hooked, Method};
 use sim::{ScenarioConfig, Setup};
@@ -35,7 +36,14 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let episodes: u64 = args.get(2).map_or(Ok(10), |s| s.parse())?;
     let seed: u64 = args.get(3).map_or(Ok(0), |s| s.parse())?;
     let ctrl = Method::script_or_filtered_checkpoint(ck)?;
-    let cfg = ScenarioConfig::default();
+    // FLOOR=grown and NEAREST=K: the grown floors and bounded observation of issue 46
+    let mut cfg = ScenarioConfig::default();
+    if std::env::var("FLOOR").as_deref() == Ok("grown") {
+        cfg.world.floor = sim::Floor::Grown;
+    }
+    if let Ok(k) = std::env::var("NEAREST") {
+        cfg.observation = obs::Bound::nearest(k.parse().map_err(|e| format!("NEAREST {k}: {e}"))?);
+    }
     let mut c = Counts::default();
     let mut batch = obs::ObsBatch::default();
     let scene: Option<(u64, usize, u32, u32)> = std::env::var("SCENE").ok().and_then(|s| {

@@ -23,6 +23,10 @@ pub struct RobotEvents {
     pub placed: Option<StorageId>,
     /// Bodies this robot touched at the end of the step.
     pub collisions: u32,
+    /// This robot touches something now and touched nothing at the end of the last step:
+    /// one collision event (onset), the paper's "collisions" read as events rather than
+    /// contact steps.
+    pub contact_onset: bool,
 }
 
 /// Read-only view of a robot.

@@ -16,6 +16,11 @@ pub struct Metrics {
     pub collisions_robot_machine: u32,
     pub collisions_robot_storage: u32,
     pub collisions_robot_wall: u32,
+    /// Collision events: steps on which a robot went from touching nothing to touching
+    /// something (summed over robots). A push held for 30 steps is 30 contact steps but
+    /// one event. Absent in records written before it existed (read as 0).
+    #[serde(default)]
+    pub collision_events: u32,
     /// P_max: parts all machines could have made had they never waited, summed over each
     /// machine's lifetime in the episode: ceil(alive_steps / prep_steps).
     pub p_max: u32,

@@ -179,6 +179,38 @@ fn collision_penalty_and_counts_per_robot() {
 }
 
 #[test]
+fn a_held_contact_is_one_collision_event_and_many_contact_steps() {
+    let r = 0.08;
+    let mut env = env_with_cfg(
+        cfg_only("collision"),
+        "2.1_1",
+        &[[-r - 0.01, 0.0], [r + 0.01, 0.0]],
+        &[[0.0, 0.8]],
+        &[[0.0, -0.8]],
+    );
+    // Pushed into each other for five steps: 10 contact steps, one onset per robot.
+    for _ in 0..5 {
+        env.step_actions(&[2, 1]).unwrap();
+    }
+    assert_eq!(env.metrics().collisions_robot_robot, 10);
+    assert_eq!(env.metrics().collision_events, 2);
+    assert!(env.events().iter().all(|e| !e.contact_onset));
+    // Apart (moving away for a while), then together again: a second event each.
+    for _ in 0..4 {
+        env.step_actions(&[1, 2]).unwrap();
+    }
+    assert!(env.events().iter().all(|e| e.collisions == 0));
+    let mut again = 0;
+    for _ in 0..40 {
+        env.step_actions(&[2, 1]).unwrap();
+        again += env.events().iter().filter(|e| e.contact_onset).count();
+    }
+    assert_eq!(again, 2);
+    assert_eq!(env.metrics().collision_events, 4);
+    assert!(env.metrics().collisions > env.metrics().collision_events);
+}
+
+#[test]
 fn mu_counts_parts_over_the_machines_lifetime() {
     let mut env = near_machine(ScenarioConfig::default());
     for _ in 0..200 {

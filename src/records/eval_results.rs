@@ -5,7 +5,8 @@ use crate::report::Numbers;
 use serde::{Deserialize, Serialize};
 
 /// One (setup, seed). Field order is the column order. The contact kinds and rates came
-/// with the safety work: results written before (docs/results/) lack them.
+/// with the safety work: results written before (docs/results/) lack them; collision
+/// events (onsets) came with issue 47, as the last column.
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
 pub struct EvalResultRecord {
     /// The controller: a model kind, with mode and checkpoint file, or a scripted baseline
@@ -24,6 +25,7 @@ pub struct EvalResultRecord {
     pub robot_robot_per_robot_step: Option<f64>,
     pub mu: f64,
     pub team_reward: f64,
+    pub collision_events: Option<f64>,
 }
 
 impl EvalResultRecord {
@@ -43,6 +45,7 @@ impl EvalResultRecord {
             robot_robot_per_robot_step: Some(n.robot_robot_per_robot_step),
             mu: n.mu,
             team_reward: n.team_reward,
+            collision_events: Some(n.collision_events),
         }
     }
 
@@ -63,6 +66,10 @@ mod tests {
     use std::path::Path;
 
     const HEADER: &str = "policy,setup,seed,episodes,parts_delivered,collisions,\
+collisions_robot_robot,collisions_robot_machine,collisions_robot_storage,\
+collisions_robot_wall,contacts_per_robot_step,robot_robot_per_robot_step,mu,team_reward,\
+collision_events";
+    const SAFETY_HEADER: &str = "policy,setup,seed,episodes,parts_delivered,collisions,\
 collisions_robot_robot,collisions_robot_machine,collisions_robot_storage,\
 collisions_robot_wall,contacts_per_robot_step,robot_robot_per_robot_step,mu,team_reward";
     const OLD_HEADER: &str = "policy,setup,seed,episodes,parts_delivered,collisions,mu,team_reward";
@@ -89,6 +96,9 @@ collisions_robot_wall,contacts_per_robot_step,robot_robot_per_robot_step,mu,team
             let text = std::fs::read_to_string(&f).unwrap();
             if text.starts_with(HEADER) {
                 assert_eq!(to_text(&rows).unwrap(), text, "{}", f.display());
+            } else if text.starts_with(SAFETY_HEADER) {
+                assert!(rows.iter().all(|r| r.collision_events.is_none()));
+                assert!(rows.iter().all(|r| r.contacts_per_robot_step.is_some()));
             } else {
                 assert!(text.starts_with(OLD_HEADER), "{}", f.display());
                 assert!(rows.iter().all(|r| r.contacts_per_robot_step.is_none()));
@@ -120,7 +130,7 @@ collisions_robot_wall,contacts_per_robot_step,robot_robot_per_robot_step,mu,team
         assert_eq!(text.lines().next(), Some(HEADER));
         assert_eq!(
             text.lines().nth(1),
-            Some("greedy,6.4_2,1,2,3.0,0.0,0.0,0.0,0.0,0.0,0.0,0.0,0.0,0.0")
+            Some("greedy,6.4_2,1,2,3.0,0.0,0.0,0.0,0.0,0.0,0.0,0.0,0.0,0.0,0.0")
         );
     }
 }

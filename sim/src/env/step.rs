@@ -190,8 +190,13 @@ impl Env {
         let r = self.sizes.robot_radius;
         let cd = self.cfg.task.collision_distance;
         let half_room = self.cfg.world.room_size / 2.0;
+        // `contact_onset` holds "was in contact last step" until the count below turns it
+        // into "started touching this step" (no second per-robot vector to keep in step
+        // with robots added and removed live; a robot added live starts untouched).
         for e in &mut self.r_events {
+            let was = e.collisions > 0;
             *e = RobotEvents::default();
+            e.contact_onset = was;
         }
         let lim = 2.0 * r + cd;
         let (pos, ev) = (&self.r_pos, &mut self.r_events);
@@ -230,6 +235,12 @@ impl Env {
         m.collisions_robot_storage += rs;
         m.collisions_robot_wall += rw;
         m.collisions += rr + rm + rs + rw;
+        let mut onsets = 0;
+        for e in &mut self.r_events {
+            e.contact_onset = e.collisions > 0 && !e.contact_onset;
+            onsets += e.contact_onset as u32;
+        }
+        m.collision_events += onsets;
     }
 
     fn advance_machines(&mut self) {
