@@ -165,7 +165,11 @@ pub struct StatsParams {
 }
 
 impl Default for Params {
+    /// The default scenario's fleet in the contract's room: bodies, action speed and
+    /// machine timing are the planner's defaults (`plan::greedy::GreedyParams`, the
+    /// simulator's own at scale 1), not a copy of them.
     fn default() -> Self {
+        let fleet = plan::greedy::GreedyParams::default();
         Self {
             node: NodeArgs::new(DEFAULT_NODE_NAME),
             control: ControlParams {
@@ -173,8 +177,8 @@ impl Default for Params {
                 controller: plan::MethodName::Greedy,
                 shield: false,
                 orca_filter: None,
-                k_speed: 0.5,
-                prep_steps: 20,
+                k_speed: fleet.k_speed.into(),
+                prep_steps: fleet.prep_steps,
                 reach: None,
                 rate_hz: 10.0,
                 use_sim_time: false,
@@ -186,9 +190,9 @@ impl Default for Params {
                 file: None,
             },
             geometry: Geometry {
-                robot_radius: 0.08,
-                machine_half: [0.12, 0.12],
-                storage_half: [0.15, 0.08],
+                robot_radius: fleet.robot_radius.into(),
+                machine_half: fleet.machine_half.map(f64::from),
+                storage_half: fleet.storage_half.map(f64::from),
                 room_size: 2.0 * msgs::validate::ROOM_HALF_EXTENT,
                 room_margin: msgs::validate::DEFAULT_MARGIN,
             },

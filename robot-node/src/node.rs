@@ -204,9 +204,9 @@ fn run_on(
 mod tests {
     use super::*;
 
-    /// robot_node's default parameters describe the default scenario's fleet, and its
-    /// builders give what the simulator's give there (`learn::baselines` tests the other
-    /// side against the same defaults).
+    /// robot_node's default parameters (bodies, speed and machine timing taken from the
+    /// planner's defaults, the control rate and room its own) rebuild the planner's default
+    /// fleet: dt from `control_rate_hz`, the reach from the radius, the contract's room.
     #[test]
     fn default_parameters_are_the_default_fleet() {
         let d = Params::default();
