@@ -11,8 +11,10 @@ Launch arguments:
     controller     `greedy`, `greedy-orca`, `matching-orca` or `policy`; empty: robot_node
                    decides (policy if a path is given)
     params_file    a ROS 2 parameters file for every node, e.g. the `fleet.yaml` that
-                   `tending fleet` writes (sizes, speeds, timeouts, per-node sections);
-                   the launch arguments above override it
+                   `tending fleet` writes (sizes, speeds, timeouts, the ORCA filter's
+                   margins as orca_clearance, orca_rest_clearance, orca_obstacle_horizon:
+                   robot_node's one way in for them; per-node sections); the launch
+                   arguments above override it
     use_sim_time   robot nodes tick on the bridge's /clock (true) or the wall clock
     bridge         `true` to start sim_bridge (false: robots only, e.g. on hardware)
 

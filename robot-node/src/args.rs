@@ -63,9 +63,10 @@ pub struct ControlParams {
     pub use_sim_time: bool,
 }
 
-/// The ORCA safety filter's margins (a policy's, matching-ORCA's): `orca_clearance`,
-/// `orca_rest_clearance`, `orca_obstacle_horizon`, or a `margins` file setting those not
-/// given (plan::margins, e.g. configs/margins/*.toml: its `[filter]` table).
+/// The ORCA safety filter's margins (a policy's, matching-ORCA's): the parameters
+/// `orca_clearance`, `orca_rest_clearance`, `orca_obstacle_horizon`, the one way in (a
+/// margins file's `[filter]` table, plan::margins, reaches a robot through them: `tending
+/// fleet --margins FILE` writes them into fleet.yaml; a `margins` parameter is refused).
 #[derive(Debug, Clone, PartialEq)]
 pub struct FilterParams {
     /// Peer clearance at full speed, m (`plan::orca::FILTER_CLEARANCE`); at rest it is the
@@ -77,8 +78,6 @@ pub struct FilterParams {
     /// Horizon for boxes and walls, s (`plan::orca::FILTER_OBSTACLE_HORIZON`, ADR 0030;
     /// greedy-orca keeps `plan::orca::OBSTACLE_HORIZON`).
     pub obstacle_horizon: f64,
-    /// `margins`: the file, already applied by [`parse`].
-    pub file: Option<PathBuf>,
 }
 
 /// The fleet's bodies and room (the launcher passes the simulator's values for the setup;
@@ -187,7 +186,6 @@ impl Default for Params {
                 clearance: plan::orca::FILTER_CLEARANCE as f64,
                 rest_clearance: plan::orca::FILTER_REST_CLEARANCE as f64,
                 obstacle_horizon: plan::orca::FILTER_OBSTACLE_HORIZON as f64,
-                file: None,
             },
             geometry: Geometry {
                 robot_radius: fleet.robot_radius.into(),
@@ -246,8 +244,8 @@ impl Params {
 pub const USAGE: &str = "usage: robot_node [--ros-args -r __ns:=/robot_N [-r __node:=NAME] \
 [-p NAME:=VALUE]... [--params-file FILE.yaml]... [--log-level LEVEL]]
 parameters: policy (path), controller (greedy|greedy-orca|matching-orca|policy), shield (false), orca_filter (true unless shield:=true), orca_clearance (0.04 m at full speed), orca_rest_clearance (0.03 m at rest),
-            orca_obstacle_horizon (0.15 s), margins (a plan::margins TOML file setting the three
-            orca_* not given), control_rate_hz (10),
+            orca_obstacle_horizon (0.15 s) (the ORCA filter's margins: a margins file's [filter]
+            table, which `tending fleet --margins FILE` writes as these), control_rate_hz (10),
             use_sim_time (false), reach (= robot_radius),
             k_speed (0.5), prep_steps (20), stale_timeout_s (1.0), static_stale_timeout_s (= stale_timeout_s, <=0 off),
             room_size (2.3 m), room_margin (0.25), nearest_machines / nearest_storages /
@@ -277,34 +275,6 @@ where
     let was_set = |n: &str| set.iter().any(|s| s == n);
     if p.lockstep.enabled {
         p.control.use_sim_time = true;
-    }
-    if let Some(f) = &p.filter.file {
-        let m = plan::Margins::load(f).map_err(|e| param_error("margins", e.to_string()))?;
-        if !m.greedy_orca.is_default() {
-            return Err(param_error(
-                "margins",
-                "robot_node runs greedy-ORCA with its built-in margins: a [greedy_orca] \
-                 table is for `tending eval` and `tending sim` only",
-            ));
-        }
-        let f = m.filter;
-        for (name, v, field) in [
-            ("orca_clearance", f.clearance, &mut p.filter.clearance),
-            (
-                "orca_rest_clearance",
-                f.rest_clearance,
-                &mut p.filter.rest_clearance,
-            ),
-            (
-                "orca_obstacle_horizon",
-                f.obstacle_horizon,
-                &mut p.filter.obstacle_horizon,
-            ),
-        ] {
-            if !was_set(name) {
-                *field = v as f64;
-            }
-        }
     }
     if !was_set("static_stale_timeout_s") {
         p.perception.static_stale_timeout_s = p.perception.stale_timeout_s;
@@ -343,7 +313,16 @@ fn apply_param(p: &mut Params, name: &str, v: &ParamValue) -> Result<bool, ArgEr
         "orca_clearance" => p.filter.clearance = positive(name, v)?,
         "orca_rest_clearance" => p.filter.rest_clearance = positive(name, v)?,
         "orca_obstacle_horizon" => p.filter.obstacle_horizon = positive(name, v)?,
-        "margins" => p.filter.file = optional_path(name, v, "path")?,
+        // one way in for the filter's margins: the parameters above (ADR 0036)
+        "margins" => {
+            return Err(param_error(
+                name,
+                "robot_node takes no margins file: set the ORCA filter's margins as the \
+                 parameters orca_clearance, orca_rest_clearance and orca_obstacle_horizon \
+                 (a margins file's [filter] clearance, rest_clearance, obstacle_horizon; \
+                 `tending fleet --margins FILE` writes them into fleet.yaml)",
+            ))
+        }
         "control_rate_hz" => p.control.rate_hz = rate_hz(name, v)?,
         "use_sim_time" => p.control.use_sim_time = boolean(name, v)?,
         "k_speed" => p.control.k_speed = positive(name, v)?,
@@ -773,36 +752,32 @@ robot_node:
         assert!(parse_params_yaml(":::\n  -", "/", "robot_node").is_err());
     }
 
+    /// The filter's margins have one way in, the `orca_*` parameters: a `margins` file
+    /// parameter is refused, on the command line or in a parameters file, naming them.
     #[test]
-    fn a_margins_file_sets_the_filter_parameters_not_given() {
-        let dir = std::env::temp_dir().join(format!("robot_node_margins_{}", std::process::id()));
-        std::fs::create_dir_all(&dir).unwrap();
-        let f = dir.join("m.toml");
-        std::fs::write(&f, "[filter]\nclearance = 0.05\nobstacle_horizon = 0.3\n").unwrap();
-        let m = format!("margins:={}", f.display());
-        let p = parse_ok(&["--ros-args", "-p", &m, "-p", "orca_obstacle_horizon:=0.2"]);
-        assert_eq!(p.filter.clearance, 0.05f32 as f64);
-        // the file leaves out the rest clearance, so the deployed one stays
+    fn a_margins_file_is_refused_naming_the_parameters() {
+        let e = parse(
+            ["--ros-args", "-p", "margins:=configs/margins/deployed.toml"],
+            None,
+        )
+        .unwrap_err()
+        .to_string();
+        for name in [
+            "margins",
+            "orca_clearance",
+            "orca_rest_clearance",
+            "orca_obstacle_horizon",
+        ] {
+            assert!(e.contains(name), "`{e}` does not name {name}");
+        }
+        let v = ParamValue::Str("m.toml".into());
+        assert!(apply_param(&mut Params::default(), "margins", &v).is_err());
+        let p = parse_ok(&["--ros-args", "-p", "orca_clearance:=0.05"]);
+        assert_eq!(p.filter.clearance, 0.05);
         assert_eq!(
             p.filter.rest_clearance,
             plan::orca::FILTER_REST_CLEARANCE as f64
         );
-        // a parameter given itself wins over the file
-        assert_eq!(p.filter.obstacle_horizon, 0.2);
-        std::fs::write(&f, "[filter]\nclearance = 0\n").unwrap();
-        let e = parse(["--ros-args", "-p", m.as_str()], None)
-            .unwrap_err()
-            .to_string();
-        assert!(
-            e.contains("margins") && e.contains("filter.clearance"),
-            "{e}"
-        );
-        std::fs::write(&f, "[greedy_orca]\nclearance = 0.03\n").unwrap();
-        let e = parse(["--ros-args", "-p", m.as_str()], None)
-            .unwrap_err()
-            .to_string();
-        assert!(e.contains("greedy_orca"), "{e}");
-        std::fs::remove_dir_all(&dir).ok();
     }
 
     #[test]
