@@ -55,6 +55,9 @@ pub struct TrainConfig {
     pub mappo_max_robots: usize,
     pub mappo_max_machines: usize,
     pub mappo_max_storages: usize,
+    /// MAPPO only: width of its MLP layers and GRU (actor and critic; the reference's
+    /// hidden_size, 64). A tuning knob of issue 47; SMAPPO keeps the paper's 64.
+    pub mappo_hidden: usize,
     /// Save checkpoints every this many updates (and at the end / on Ctrl-C).
     pub save_every: usize,
     /// Sample rollout actions behind the one-step action shield (`plan::shield`, the one
@@ -123,6 +126,7 @@ impl Default for TrainConfig {
             mappo_max_robots: 42,
             mappo_max_machines: 28,
             mappo_max_storages: 14,
+            mappo_hidden: 64,
             save_every: 5,
             shield: false,
             orca_filter: false,
@@ -158,6 +162,7 @@ impl TrainConfig {
             ("num_mini_batch", self.num_mini_batch),
             ("data_chunk_length", self.data_chunk_length),
             ("save_every", self.save_every),
+            ("mappo_hidden", self.mappo_hidden),
         ];
         for (name, v) in pos {
             if v == 0 {

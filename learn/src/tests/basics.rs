@@ -24,6 +24,25 @@ fn config_toml_defaults_and_unknown_fields() {
     assert_eq!(c.data_chunk_length, 10);
     assert!(TrainConfig::from_toml("ppo_epochs = 5\n").is_err());
     assert!(TrainConfig::from_toml("n_envs = 0\n").is_err());
+    assert!(TrainConfig::from_toml("mappo_hidden = 0\n").is_err());
+}
+
+/// `mappo_hidden` sizes MAPPO's actor and critic (issue 47's tuning knob), not SMAPPO's.
+#[test]
+fn mappo_hidden_sizes_both_mappo_networks() {
+    let cfg = TrainConfig::from_toml("mappo_hidden = 32\nn_envs = 1\n").unwrap();
+    let sched = parse_curriculum("2.2_2:4").unwrap();
+    let m = Trainer::new(
+        ModelKind::Mappo,
+        cfg.clone(),
+        short_episodes(),
+        sched.clone(),
+        1,
+    )
+    .unwrap();
+    assert_eq!((m.actor.arch.hidden, m.critic.arch.hidden), (32, 32));
+    let s = Trainer::new(ModelKind::Smappo, cfg, short_episodes(), sched, 1).unwrap();
+    assert_eq!(s.actor.arch.hidden, 64);
 }
 
 /// 2 updates, save, resume, 1 update == 3 updates straight, bit for bit (both models),

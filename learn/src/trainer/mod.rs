@@ -292,9 +292,13 @@ impl Trainer {
                 }
                 // The actor is padded to the configured maxima (zero-shot evaluation);
                 // the critic only needs the robots it is trained with.
+                let sized = |mut a: ArchConfig| {
+                    a.hidden = cfg.mappo_hidden;
+                    a
+                };
                 (
-                    ArchConfig::mappo(flat, cfg.mappo_max_robots),
-                    ArchConfig::mappo(flat, max_robots),
+                    sized(ArchConfig::mappo(flat, cfg.mappo_max_robots)),
+                    sized(ArchConfig::mappo(flat, max_robots)),
                 )
             }
         };
