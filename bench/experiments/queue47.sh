@@ -17,6 +17,8 @@
 #   5. P at 6.4_2: one 200-step env per PPO update, 2,000 updates, 15 epochs, 1 mini-batch,
 #      both models, seeds 0-2
 #   6. AT at 14.10_4, then P at 14.10_4 (same)
+#   6b. PB: B's curriculum under the paper's schedule (Fig. 7's 400K axis: 2,000 updates of
+#      one 6.4_2 env, then 100 updates per stage), both models, seeds 0-2
 #   7. U's remaining runs (bench/experiments/run.sh U, as campaign.sh runs it)
 # Every run lands in results/paper/{T,AT,P,U}/...; after each run (and every 25 min while
 # one is in flight) the queue commits results/paper and docs/experiments with explicit
@@ -119,6 +121,20 @@ p_runs() { # setup: P, both models, seeds 0-2
     done
 }
 
+pb_runs() { # PB: B's curriculum on the paper's schedule (stages at 400K, 420K, 440K steps)
+    local cfg="$R/PB.train.toml" seed m
+    header 1 15 1 24 16 8 >"$cfg"
+    for seed in $SEEDS; do
+        for m in smappo mappo; do
+            local out="$R/PB/$m/seed$seed"
+            train "$out" "$m" "$seed" "$cfg" --curriculum "6.4_2:2000,12.8_4:100,18.12_6:100,24.16_8:100"
+            evaluate "$out/policy.safetensors" 6.4_2,12.8_4,18.12_6,24.16_8 "$out/eval" "$EVAL_SEEDS"
+            report >/dev/null 2>&1 || true
+            commit "Queue 47, PB (B on the paper's schedule): $m seed $seed finished and evaluated"
+        done
+    done
+}
+
 at_runs() { # setup: AT, the tuned MAPPO at A's budget, seeds 0-2
     local s="$1" seed
     [ -f "$R/T/selected.toml" ] || { echo "-- AT $s skipped: no config selected yet (T.md)"; return 0; }
@@ -206,6 +222,10 @@ report() {
     for x in $R/P/*/*/seed*/log.csv; do [ -f "$(dirname "$x")/.done" ] && pl+=("$x"); done
     table_of P "P: the paper's schedule (1 env per update, 2,000 updates, 15 epochs, 1 mini-batch)" \
         $R/P/*/*/seed*/eval/results.csv -- "${pl[@]}"
+    local pbl=()
+    for x in $R/PB/*/seed*/log.csv; do [ -f "$(dirname "$x")/.done" ] && pbl+=("$x"); done
+    table_of PB "PB: B's curriculum on the paper's schedule (1 env per update, stages at 2,000, 2,100, 2,200 updates)" \
+        $R/PB/*/seed*/eval/results.csv -- "${pbl[@]}"
     shopt -u nullglob
     bench/experiments/run.sh report
 }
@@ -226,6 +246,7 @@ at_runs 6.4_2
 p_runs 6.4_2
 at_runs 14.10_4
 p_runs 14.10_4
+pb_runs
 echo "=== U at $(date -u +%FT%TZ)"
 bench/experiments/run.sh U
 report >/dev/null 2>&1 || true

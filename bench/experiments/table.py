@@ -10,7 +10,7 @@ the std over evaluation seeds when there are several, '-' otherwise.
 
 With --out, the text below the KEEP marker of an existing file (the hand-written discussion)
 is kept; a file from before the marker keeps what follows its first table."""
-import argparse, csv, os, statistics, sys
+import argparse, csv, math, os, statistics, sys
 from collections import defaultdict
 
 KEEP = "<!-- Generated above by bench/experiments/table.py; text below this line is kept on regeneration. -->"
@@ -24,6 +24,10 @@ BY_DIR = {"greedy-orca", "matching-orca", "shipped"}
 KINDS = ["collisions_robot_robot", "collisions_robot_machine", "collisions_robot_storage",
          "collisions_robot_wall"]
 METRICS = ["parts_delivered", "collisions", "mu"] + KINDS
+# read when present, NaN otherwise: collision events (onsets) came with issue 47
+# (bench/experiments/onsets.py adds them to older evaluations); index EVENTS in a tuple
+OPTIONAL = ["collision_events"]
+EVENTS = len(METRICS)
 
 
 def setup_key(s):
@@ -72,7 +76,8 @@ def read_eval(path, eval_seed=None):
         if eval_seed is not None and r.get("seed", "0") != str(eval_seed):
             continue
         try:
-            per[r["setup"]].append(tuple(float(r[k]) for k in METRICS))
+            per[r["setup"]].append(tuple(float(r[k]) for k in METRICS)
+                                   + tuple(float(r.get(k) or "nan") for k in OPTIONAL))
         except ValueError as e:
             sys.exit(f"{path}:{i}: {e}")
     return models.pop(), per
@@ -89,6 +94,8 @@ def read_paper(path, exp):
 
 
 def ms(xs, p, std_ok=True):
+    if any(math.isnan(x) for x in xs):
+        return "-"  # an optional column some evaluation lacks
     m = statistics.fmean(xs)
     if not std_ok:
         return f"{m:.{p}f} (-)"
@@ -135,7 +142,7 @@ def aggregate(files, eval_seed=None):
             if not vals:
                 continue
             runs[(setup, model)].append(
-                tuple(statistics.fmean(v[k] for v in vals) for k in range(len(METRICS))))
+                tuple(statistics.fmean(v[k] for v in vals) for k in range(len(vals[0]))))
             if model in SCRIPTED:
                 scripted_rows[(setup, model)].extend(vals)
     return runs, scripted_rows
@@ -195,15 +202,17 @@ def main():
         "the same setups, episodes and eval seeds, std over eval seeds"
         + (f" ({n_seeds})" if n_seeds > 1 else " ('-' with one)")
         + ". Collisions are contact steps per episode (robot-steps in contact), split by kind: "
-        "robot-robot (r-r), robot-machine (r-m), robot-storage (r-s), robot-wall (r-w). "
+        "robot-robot (r-r), robot-machine (r-m), robot-storage (r-s), robot-wall (r-w); "
+        "events: collision events per episode (a robot starting to touch something, the "
+        "paper's count). "
         f"MU (paper's protocol): trained models only, {proto}. "
         "paper MU: the paper's value at its full budget"
         + (f" ({tables(a.exp)})" if a.exp and tables(a.exp) else "")
         + ", '-' where it reports none.\n")
     out.append("| setup | method | training seeds | parts delivered | collisions | r-r | r-m | r-s "
-               "| r-w | MU | MU (paper's protocol) | paper MU |")
-    out.append("|---|---|---|---|---|---|---|---|---|---|---|---|")
-    precision = [(0, 1), (1, 1), (3, 1), (4, 1), (5, 1), (6, 1), (2, 2)]
+               "| r-w | events | MU | MU (paper's protocol) | paper MU |")
+    out.append("|---|---|---|---|---|---|---|---|---|---|---|---|---|")
+    precision = [(0, 1), (1, 1), (3, 1), (4, 1), (5, 1), (6, 1), (EVENTS, 1), (2, 2)]
     setups = sorted({s for s, _ in runs}, key=setup_key)
     models = sorted({m for _, m in runs}, key=lambda m: (ORDER.index(m) if m in ORDER else len(ORDER), m))
     for s in setups:

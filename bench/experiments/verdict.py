@@ -30,16 +30,20 @@ checked). They are two-sided: a result far better than the paper's does not repr
   after larger than twice the standard error of that difference (from the update-to-update
   spread in the two windows). The paper: SMAPPO drops at the first change only, MAPPO at
   every one.
-- Collisions are contact steps (robot-steps in contact with anything), the only count
-  `tending eval` and the training log give; the paper counts collisions (events). Collision
-  events (onsets) are not in our outputs: missing, so every collision verdict is on
-  contact steps.
+- Collisions are judged twice, under the same rule: as contact steps (robot-steps in
+  contact with anything; for A from the last 100 training episodes, as Table I) and as
+  collision events (a robot starting to touch something: the paper's word, from the
+  evaluations only, since the training log has no events; bench/experiments/onsets.py added
+  them to evaluations made before `tending eval` counted them). A claim whose evaluations
+  lack events is pending.
 """
-import argparse, csv, glob, itertools, os, statistics, sys
+import argparse, csv, glob, itertools, math, os, statistics, sys
 
 sys.path.insert(0, os.path.dirname(__file__))
 import table  # noqa: E402  (the campaign's reader: one parser for tables and verdicts)
 
+EVENTS = table.EVENTS  # index of collision events in a metric tuple
+UNIT = {1: "contact steps per episode", EVENTS: "collision events per episode"}
 SEEDS = 3
 TOL_MU = 0.05    # MU units
 TOL_PCT = 0.25   # share of our own percentage
@@ -53,6 +57,8 @@ SETUPS = {
     "P": ["6.4_2", "14.10_4"],
     # A's MAPPO re-trained with the tuned settings (docs/experiments/T.md); SMAPPO is A's
     "AT": ["6.4_2", "14.10_4"],
+    # B's curriculum on the paper's schedule (Fig. 7's axis: one env per update)
+    "PB": ["6.4_2", "12.8_4", "18.12_6", "24.16_8"],
 }
 A2000 = ["6.4_2", "8.6_2", "10.6_4", "12.8_4", "14.10_4"]  # Table I at 2,000 episodes
 # Experiments read by Table I's protocol (last 100 training episodes), one folder per setup.
@@ -95,11 +101,19 @@ class Exp:
                     dst[k] = v
 
     def values(self, setup, model, k):
-        """Per-seed values of metric k (0 parts, 1 collisions, 2 MU) of the seeds finished
-        so far (None if none). Table I (A) uses the last 100 training episodes."""
-        src = self.logs if self.name in PER_SETUP else self.eval
+        """Per-seed values of metric k (0 parts, 1 collisions, 2 MU, EVENTS collision
+        events) of the seeds finished so far (None if none, or if an evaluation lacks the
+        metric). Table I (A) uses the last 100 training episodes, but for events, which
+        only evaluations count."""
+        src = self.logs if self.name in PER_SETUP and k != EVENTS else self.eval
         v = src.get((setup, model), [])
-        return [x[k] for x in v] if v else None
+        vals = [x[k] for x in v]
+        return vals if vals and not any(math.isnan(x) for x in vals) else None
+
+    def lacks_events(self, setups):
+        """(setup model) pairs evaluated whose evaluations have no collision events."""
+        return [f"{s} {m}" for s in self.done(setups) for m in ("smappo", "mappo")
+                if self.values(s, m, EVENTS) is None]
 
     def missing(self, setups, models=("smappo", "mappo")):
         """(setup model) pairs with fewer than SEEDS finished seeds."""
@@ -190,6 +204,8 @@ def gain_verdict(e, setups, paper_pct, k=0, fewer=False):
     done = e.done(setups)
     if not done:
         return "pending", "-", f"{len(e.missing(setups))} runs missing"
+    if k == EVENTS and e.lacks_events(setups):
+        return no_events(e, setups)
     gains = {s: gain_interval(e.values(s, "smappo", k), e.values(s, "mappo", k), fewer)
              for s in done}
     best = max(gains, key=lambda s: gains[s][0])
@@ -207,18 +223,27 @@ def gain_verdict(e, setups, paper_pct, k=0, fewer=False):
     return ("direction only" if g > 0 else "not"), ours, note
 
 
+def no_events(e, setups):
+    miss = e.lacks_events(setups)
+    return ("pending", "-", f"{len(miss)} evaluated (setup, model) pairs lack collision "
+            "events (bench/experiments/onsets.py adds them)")
+
+
 def order_verdict(e, setups, smappo_fewer=True, k=1):
     """A claim without a size: on every setup named, SMAPPO has fewer (smappo_fewer) or
-    more (not smappo_fewer) collisions than MAPPO, on seed means."""
+    more (not smappo_fewer) collisions (k: 1 contact steps, EVENTS events) than MAPPO, on
+    seed means."""
     done = e.done(setups)
     if not done:
         return "pending", "-", f"{len(e.missing(setups))} runs missing"
+    if k == EVENTS and e.lacks_events(setups):
+        return no_events(e, setups)
     holds = [s for s in done
              if (mean(e.values(s, "smappo", k)) < mean(e.values(s, "mappo", k))) == smappo_fewer]
     who = "SMAPPO" if smappo_fewer else "MAPPO"
     ours = f"{who} fewer on {len(holds)}/{len(done)}"
     note = ", ".join(f"{s} {mean(e.values(s, 'smappo', k)):.0f} vs {mean(e.values(s, 'mappo', k)):.0f}"
-                     for s in done) + " (SMAPPO vs MAPPO, contact steps per episode)"
+                     for s in done) + f" (SMAPPO vs MAPPO, {UNIT[k]})"
     p = pending(e, setups, ours, note)
     if p:
         return p
@@ -253,16 +278,19 @@ def few_agents_verdict(e, small="8.6_2", large="14.10_4", paper_gap=0.01):
     return ("direction only" if gaps[large][0] > g else "not"), ours, note
 
 
-def collisions_fall_verdict(e, a="10.6_4", b="12.8_4"):
+def collisions_fall_verdict(e, a="10.6_4", b="12.8_4", k=1):
     """Sec. V-A: collisions drop from 10.6_4 to 12.8_4 (both models; the paper gives no
     figure, Fig. 4's bars only): an order claim."""
     setups = [a, b]
     if len(e.done(setups)) < 2:
         return "pending", "-", f"{len(e.missing(setups))} runs missing"
-    falls = {m: (mean(e.values(a, m, 1)), mean(e.values(b, m, 1))) for m in ("smappo", "mappo")}
+    if k == EVENTS and e.lacks_events(setups):
+        return no_events(e, setups)
+    falls = {m: (mean(e.values(a, m, k)), mean(e.values(b, m, k))) for m in ("smappo", "mappo")}
     ours = "; ".join(f"{m} {x:.0f} -> {y:.0f}" for m, (x, y) in falls.items())
     n = sum(1 for x, y in falls.values() if y < x)
-    note = f"falls for {n} of 2 models (contact steps per episode, last 100 training episodes)"
+    src = "evaluations" if k == EVENTS else "last 100 training episodes"
+    note = f"falls for {n} of 2 models ({UNIT[k]}, {src})"
     p = pending(e, setups, ours, note)
     if p:
         return p
@@ -413,7 +441,8 @@ def main():
         paper[(r["experiment"], table.norm_setup(r["setup"]), r["model"])] = (float(r["mu"]), r["std"])
     pe = {x: {(s, m): v for (e, s, m), v in paper.items() if e == x} for x in "ABCDU"}
     pe["P"] = pe["AT"] = pe["A"]  # other budget readings / baselines of Table I
-    ex = {x: Exp(a.runs, x) for x in ("A", "B", "C", "D", "U", "P", "AT")}
+    pe["PB"] = pe["B"]  # Table II under the paper's schedule
+    ex = {x: Exp(a.runs, x) for x in ("A", "B", "C", "D", "U", "P", "AT", "PB")}
     ex["AT"].borrow(ex["A"], "smappo")
     rows = [
         "Full retraining (A: 2,000 episodes = 250 updates of 8 envs; 100.16_2: 104 episodes = 13 updates)",
@@ -428,8 +457,12 @@ def main():
         ("Sec. V-A: SMAPPO safer (fewer collisions on all but the smallest setup)",
          "5 of 6 (smallest: no significant difference)",
          order_verdict(ex["A"], SETUPS["A"][1:])),
+        ("Sec. V-A: SMAPPO safer, as collision events", "5 of 6",
+         order_verdict(ex["A"], SETUPS["A"][1:], k=EVENTS)),
         ("Sec. V-A: collisions fall from 10.6_4 to 12.8_4 (robots are smaller at 12.8_4)",
          "fall (Fig. 4)", collisions_fall_verdict(ex["A"])),
+        ("Sec. V-A: collisions fall from 10.6_4 to 12.8_4, as collision events",
+         "fall (Fig. 4)", collisions_fall_verdict(ex["A"], k=EVENTS)),
         ("Sec. V-A: with few agents MAPPO is comparable to SMAPPO, and falls behind as agents grow",
          "8.6_2: 0.66 vs 0.65", few_agents_verdict(ex["A"])),
         ("Fig. 5: SMAPPO reaches 50 % of its final reward in 100 episodes, 70 % in 200 (14.10_4)",
@@ -460,10 +493,23 @@ def main():
         ("Abstract: curriculum, up to 45 % more parts", "+45 %", gain_verdict(ex["B"], SETUPS["B"], 45)),
         ("Abstract: curriculum, up to 49 % fewer collisions", "-49 %",
          gain_verdict(ex["B"], SETUPS["B"], 49, k=1, fewer=True)),
+        ("Abstract: curriculum, up to 49 % fewer collisions, as collision events", "-49 %",
+         gain_verdict(ex["B"], SETUPS["B"], 49, k=EVENTS, fewer=True)),
         ("Sec. V-B: SMAPPO has fewer collisions in every curriculum setup", "4 of 4",
          order_verdict(ex["B"], SETUPS["B"])),
+        ("Sec. V-B: fewer collisions in every curriculum setup, as collision events", "4 of 4",
+         order_verdict(ex["B"], SETUPS["B"], k=EVENTS)),
         ("Fig. 7, per robot: MAPPO's reward drops at every new stage, SMAPPO's at the first only",
          "drops: SMAPPO at 1, MAPPO at 1, 2, 3", stage_drops(ex["B"])),
+        "Curriculum on the paper's schedule (PB: 2,000 updates of one 6.4_2 env, then 100 per stage: Fig. 7's 400K / 420K / 440K steps)",
+        ("Table II, paper's schedule", "SMAPPO 0.54-0.79, MAPPO 0.39-0.55",
+         table_verdict(ex["PB"], pe["PB"], SETUPS["PB"])),
+        ("Abstract: curriculum, up to 45 % more parts, paper's schedule", "+45 %",
+         gain_verdict(ex["PB"], SETUPS["PB"], 45)),
+        ("Abstract: curriculum, up to 49 % fewer collisions (events), paper's schedule", "-49 %",
+         gain_verdict(ex["PB"], SETUPS["PB"], 49, k=EVENTS, fewer=True)),
+        ("Fig. 7 per robot, paper's schedule", "drops: SMAPPO at 1, MAPPO at 1, 2, 3",
+         stage_drops(ex["PB"])),
         "Zero-shot from 6.4_2 (C)",
         ("Table III: zero-shot MU of both models", "SMAPPO 0.31-0.73, MAPPO 0.12-0.65",
          table_verdict(ex["C"], pe["C"], SETUPS["C"])),
@@ -471,8 +517,12 @@ def main():
          gain_verdict(ex["C"], ["42.28_14"], 272)),
         ("Sec. V-C: zero-shot SMAPPO safer on the far setups (2.2_2 and 24.16_8 ... 42.28_14)",
          "5 of 5 far setups", order_verdict(ex["C"], C_FAR)),
+        ("Sec. V-C: zero-shot SMAPPO safer on the far setups, as collision events",
+         "5 of 5 far setups", order_verdict(ex["C"], C_FAR, k=EVENTS)),
         ("Sec. V-C: zero-shot MAPPO safer on the three setups nearest training (4.2_2, 12.8_4, 18.12_6)",
          "3 of 3 near setups", order_verdict(ex["C"], C_NEAR, smappo_fewer=False)),
+        ("Sec. V-C: zero-shot MAPPO safer near training, as collision events",
+         "3 of 3 near setups", order_verdict(ex["C"], C_NEAR, smappo_fewer=False, k=EVENTS)),
         "Curriculum after a short initial training (D: 200 episodes, then the stages)",
         ("Table IV: short initial training MU of both models", "SMAPPO 0.27-0.76, MAPPO 0.17-0.48",
          table_verdict(ex["D"], pe["D"], SETUPS["D"])),
@@ -486,8 +536,9 @@ def main():
            "**direction only** when SMAPPO is ahead of MAPPO as the paper says but the size "
            "is outside, **not** otherwise. A claim without a size (an order over setups) is "
            "reproduced when it holds on every setup it names. Intervals are in brackets. "
-           "Collisions are contact steps (robot-steps in contact): collision events (onsets) "
-           "are not in our outputs (missing).", "",
+           "Collisions are judged twice: as contact steps (robot-steps in contact; A: last "
+           "100 training episodes) and as collision events (a robot starting to touch "
+           "something, the paper's count; evaluations only).", "",
            "| claim of the paper | paper | ours | verdict | detail |", "|---|---|---|---|---|"]
     counts = {}
     for r in rows:
