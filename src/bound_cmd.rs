@@ -3,10 +3,10 @@
 //! 10's targets compare with it: where 1.1x the best script is above the bound, no policy
 //! can meet that target.
 
-use crate::records::{self, PartsBoundRecord};
 use anyhow::{Context, Result};
 use clap::Args;
 use learn::eval::eval_env_seed;
+use records::PartsBoundRecord;
 use sim::{parts_bound, Env};
 use std::path::PathBuf;
 

@@ -2,12 +2,11 @@
 //! as the paper does: per seed the mean over its episodes, then mean (std) over seeds.
 
 use crate::method::CheckpointFlags;
-use crate::records::{self, EvalResultRecord};
-use crate::report::{self, Numbers};
-use crate::stats::markdown_table;
 use anyhow::{bail, Context, Result};
 use clap::Args;
 use learn::evaluate;
+use records::stats::markdown_table;
+use records::{report, EvalResultRecord, Numbers};
 use sim::Setup;
 use std::path::PathBuf;
 

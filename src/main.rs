@@ -4,19 +4,10 @@
 mod bag_cmd;
 mod bench_sim;
 mod bound_cmd;
-mod chart;
 mod eval_cmd;
 mod method;
-mod plot;
-mod plot_cmd;
-mod plot_limits;
-mod plot_pareto;
-mod records;
-mod render;
-mod report;
 mod security_cmd;
 mod sim_cmd;
-mod stats;
 mod train_cmd;
 
 use clap::{Parser, Subcommand};
@@ -51,7 +42,7 @@ enum Cmd {
     /// Record every contract topic of a running fleet into a bag until Ctrl-C / SIGTERM.
     Record(bag_cmd::RecordArgs),
     /// PNG figures of the experiments: eval bar charts, training curves (docs/experiments).
-    Plot(plot_cmd::PlotArgs),
+    Plot(plots::PlotArgs),
     /// DDS Security keystores (SROS2 layout): create, add an enclave, revoke, list.
     Security(security_cmd::SecurityArgs),
     /// Print the default scenario config (TOML) to start a custom one from.
@@ -69,7 +60,7 @@ fn main() -> std::process::ExitCode {
         Cmd::Bound(a) => bound_cmd::run(a),
         Cmd::Bag(a) => bag_cmd::run(a),
         Cmd::Record(a) => bag_cmd::record(a),
-        Cmd::Plot(a) => plot_cmd::run(a),
+        Cmd::Plot(a) => plots::run(a),
         Cmd::Security(a) => security_cmd::run(a),
         Cmd::Config => {
             print!("{}", sim::ScenarioConfig::default().to_toml());

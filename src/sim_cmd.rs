@@ -4,12 +4,12 @@
 //! controller both commands report the same numbers.
 
 use crate::method::CheckpointFlags;
-use crate::render::Frame;
-use crate::report::{self, Numbers};
-use crate::stats::markdown_table;
 use anyhow::{bail, Context, Result};
 use clap::Args;
 use learn::{evaluate, run_episode_watched, Method};
+use plots::episode::Frame;
+use records::stats::markdown_table;
+use records::{report, Numbers};
 use sim::{Env, Metrics, ScenarioConfig, Setup};
 use std::path::PathBuf;
 
@@ -88,7 +88,7 @@ fn episodes(a: &SimArgs, cfg: &ScenarioConfig) -> Result<(String, Vec<Metrics>)>
         run_episode_watched(&ctrl, cfg, setup, a.seed, 0, |env| {
             frames.push(Frame::capture(env))
         })?;
-        crate::render::write(path, cfg, &frames)?;
+        plots::episode::write(path, cfg, &frames)?;
         eprintln!("rendered {} frames to {}", frames.len(), path.display());
     }
     let ms = evaluate(&ctrl, cfg, setup, a.seed, a.episodes)

@@ -7,13 +7,13 @@
 //! rollout share it), seeded by (seed, update) so resume stays exact; log.csv's `setup`
 //! column holds each update's draw.
 
-use crate::plot::{plot_training, CurvePoint};
-use crate::records::{self, TrainLogRecord};
 use anyhow::{anyhow, bail, Context, Result};
 use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
 use learn::{parse_curriculum, SetupRange, Stage, TrainConfig, Trainer};
+use plots::training::{plot_training, CurvePoint};
 use policy::ModelKind;
+use records::TrainLogRecord;
 use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -21,6 +21,8 @@ use std::sync::OnceLock;
 use std::time::Instant;
 
 #[derive(Args, Debug)]
+// `--config` is the training config here: the scenario's `--config` alias (sim::args) goes.
+#[command(mut_arg("scenario", |a| a.alias(None)))]
 pub struct TrainArgs {
     /// smappo | mappo
     #[arg(long, default_value = "smappo")]

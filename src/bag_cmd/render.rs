@@ -84,7 +84,7 @@ pub(super) fn render(
             }
         }
         let live = |s: &State| s.pos.filter(|(_, t)| next.saturating_sub(*t) <= stale_ns);
-        frames.push(crate::render::Frame {
+        frames.push(plots::episode::Frame {
             robots: robots
                 .values()
                 .filter_map(|s| live(s).map(|(p, _)| (p, s.flag)))
@@ -106,7 +106,7 @@ pub(super) fn render(
     }
     let mut cfg = sim::ScenarioConfig::default();
     cfg.world.dt = frame_period as f32;
-    crate::render::write(out, &cfg, &frames)?;
+    plots::episode::write(out, &cfg, &frames)?;
     println!(
         "{} frames ({:.1} s of bag time, {} robots, {} machines, {} storages) -> {}",
         frames.len(),

@@ -3,10 +3,10 @@
 //! Up and to the left is better; the points a method can be compared on are in one panel.
 
 use crate::chart;
-use crate::records::{self, EvalResultRecord};
 use anyhow::{anyhow, Result};
 use clap::Args;
 use plotters::prelude::*;
+use records::EvalResultRecord;
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
@@ -308,7 +308,7 @@ mod tests {
         assert_eq!(family("greedy-orca"), "greedy-orca");
         assert_eq!(family("smappo+orca"), "smappo+orca");
         // A results.csv of before the contact rates is refused with its name.
-        let old = Path::new(env!("CARGO_MANIFEST_DIR")).join("docs/results/greedy_6.4_2.csv");
+        let old = Path::new(env!("CARGO_MANIFEST_DIR")).join("../docs/results/greedy_6.4_2.csv");
         let err = format!("{:#}", read(&[old]).unwrap_err());
         assert!(
             err.contains("greedy_6.4_2.csv:2") && err.contains("contacts"),

@@ -26,7 +26,8 @@ mod tests {
 
     #[test]
     fn committed_bounds_read_and_write_back_the_same_columns() {
-        let p = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("docs/safety/eval/bound.csv");
+        let p =
+            std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../docs/safety/eval/bound.csv");
         let rows: Vec<PartsBoundRecord> = read(&p).unwrap().into_iter().map(|l| l.record).collect();
         assert!(rows.len() >= 30);
         // Per episode the bound is the smaller of its parts, so their means are at least it;

@@ -1,10 +1,13 @@
-//! The CSV files tending writes and reads, one typed record per file kind, shared by the
-//! writer and every reader (csv + serde; columns are found by header name, never by index):
+//! What tending's commands report, one definition for every writer and reader:
 //!
-//! * [`TrainLogRecord`]: a training run's `log.csv` (`tending train`, `tending plot curves`).
-//! * [`EvalResultRecord`]: `tending eval`'s `results.csv` (`tending plot bars|pareto`).
-//! * [`PaperMuRecord`]: the paper's MU values (`bench/experiments/paper_mu.csv`).
-//! * [`PartsBoundRecord`]: `tending bound`'s `bound.csv` (`tending plot limits`).
+//! * [`report`]: a run's numbers (`tending sim`, `tending eval`) and their Markdown cells;
+//!   [`stats`]: the paper's "mean (std)" and Markdown tables.
+//! * The CSV files tending writes and reads, one typed record per file kind (csv + serde;
+//!   columns are found by header name, never by index):
+//!   * [`TrainLogRecord`]: a training run's `log.csv` (`tending train`, `tending plot curves`).
+//!   * [`EvalResultRecord`]: `tending eval`'s `results.csv` (`tending plot bars|pareto`).
+//!   * [`PaperMuRecord`]: the paper's MU values (`bench/experiments/paper_mu.csv`).
+//!   * [`PartsBoundRecord`]: `tending bound`'s `bound.csv` (`tending plot limits`).
 //!
 //! Columns added by later versions are `Option`s, so files already committed (docs/,
 //! policy/pretrained/) still read; the tests beside each record read them.
@@ -12,11 +15,14 @@
 mod eval_results;
 mod paper_mu;
 mod parts_bound;
+pub mod report;
+pub mod stats;
 mod train_log;
 
 pub use eval_results::EvalResultRecord;
 pub use paper_mu::PaperMuRecord;
 pub use parts_bound::PartsBoundRecord;
+pub use report::Numbers;
 pub use train_log::TrainLogRecord;
 
 use anyhow::{anyhow, bail, Result};

@@ -5,10 +5,10 @@
 //! the target line means the target asks for nearly every part the layout allows.
 
 use crate::chart;
-use crate::records::{self, PartsBoundRecord};
 use anyhow::{bail, Result};
 use clap::Args;
 use plotters::prelude::*;
+use records::PartsBoundRecord;
 use std::collections::BTreeMap;
 use std::path::PathBuf;
 
@@ -68,7 +68,7 @@ struct Column {
 fn columns(a: &LimitsArgs) -> Result<(Vec<String>, Vec<Column>)> {
     // Mean parts per setup and method, merged over files and named as `tending plot
     // pareto` names them (so --scripts matches what its legend shows).
-    let (methods, points) = crate::plot_pareto::read(&a.files)?;
+    let (methods, points) = crate::pareto::read(&a.files)?;
     let mut bound: BTreeMap<String, Mean> = BTreeMap::new();
     for f in &a.bound {
         for records::Line { line, record: r } in records::read::<PartsBoundRecord>(f)? {
@@ -112,7 +112,7 @@ fn columns(a: &LimitsArgs) -> Result<(Vec<String>, Vec<Column>)> {
     if cols.is_empty() {
         bail!("no setup has both a script's results and a bound");
     }
-    cols.sort_by_key(|c| crate::plot_pareto::setup_key(&c.setup));
+    cols.sort_by_key(|c| crate::pareto::setup_key(&c.setup));
     Ok((methods, cols))
 }
 
@@ -231,7 +231,7 @@ fn draw<DB: DrawingBackend>(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::records::EvalResultRecord;
+    use records::EvalResultRecord;
 
     fn row(policy: &str, setup: &str, seed: u64, parts: f64) -> EvalResultRecord {
         EvalResultRecord {

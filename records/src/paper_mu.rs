@@ -23,8 +23,8 @@ mod tests {
 
     #[test]
     fn committed_paper_values_read() {
-        let p =
-            std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("bench/experiments/paper_mu.csv");
+        let p = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("../bench/experiments/paper_mu.csv");
         let rows: Vec<PaperMuRecord> = read(&p).unwrap().into_iter().map(|l| l.record).collect();
         assert!(rows.len() > 40);
         assert!(rows.iter().all(|r| (0.0..=1.0).contains(&r.mu)));

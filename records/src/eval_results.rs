@@ -1,7 +1,7 @@
 //! `results.csv` of `tending eval`: per setup and seed, the mean over that seed's episodes
 //! (`tending plot bars` and `tending plot pareto` read it, so does bench/experiments).
 
-use crate::report::Numbers;
+use crate::Numbers;
 use serde::{Deserialize, Serialize};
 
 /// One (setup, seed). Field order is the column order. The contact kinds and rates came
@@ -77,7 +77,7 @@ collisions_robot_wall,contacts_per_robot_step,robot_robot_per_robot_step,mu,team
     /// Every committed results.csv reads; those of this version write back byte for byte.
     #[test]
     fn committed_results_read_and_round_trip() {
-        let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+        let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
         let mut files = vec![];
         for dir in ["docs/results", "docs/safety/eval"] {
             for e in walk(&root.join(dir)) {

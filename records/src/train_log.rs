@@ -96,7 +96,7 @@ actor_grad_norm,critic_grad_norm,rollout_secs,train_secs,wall_secs,agent_steps_p
 contact_rate,lambda";
 
     fn committed(rel: &str) -> PathBuf {
-        Path::new(env!("CARGO_MANIFEST_DIR")).join(rel)
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("..").join(rel)
     }
 
     #[test]

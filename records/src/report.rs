@@ -1,7 +1,7 @@
 //! The numbers `tending sim` and `tending eval` report, one definition for both: parts,
 //! contacts by kind (robot-robot, robot-machine, robot-storage, robot-wall), contacts per
 //! robot-step, MU and team reward; the Markdown columns (the CSV record is
-//! [`crate::records::EvalResultRecord`]).
+//! [`crate::EvalResultRecord`]).
 
 use crate::stats::fmt_ms;
 use sim::Metrics;

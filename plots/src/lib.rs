@@ -1,32 +1,43 @@
-//! `tending plot`: PNG figures of the paper's experiments (section V) from the files
-//! `tending eval` and `tending train` write.
+//! tending's pictures, drawn with plotters (the library behind `tending plot`, and the
+//! curve.png and episode renders of `tending train`, `tending sim` and `tending bag render`):
 //!
-//! * `bars`: evaluation `results.csv` files, one per trained model (a scripted baseline has
-//!   one file and no training seeds). Per file, rows of the same setup (evaluation seeds) are
-//!   averaged; then, per setup and model, mean and population std over files, i.e. over
-//!   training seeds, the paper's "average and std as error bars" (Fig. 4, 6, 8, 9). Writes
-//!   one chart each for parts delivered, collisions and MU, setups on the x axis by robot
-//!   count, and marks the paper's MU (`--paper`) on the MU chart.
-//! * `curves`: training `log.csv` files; per model, mean over seeds of each logged metric vs
-//!   episodes with a std band (Fig. 5 and 7), and dashed lines where the curriculum stage
-//!   changes (from log.csv's `setup` column, or `--schedule`).
+//! * [`chart`]: the house style every figure shares (font, sizes, palette, mesh, legend).
+//! * [`training`]: a training run's curve.png; [`episode`]: an episode as GIF, SVG or PNG
+//!   frames.
+//! * `tending plot` ([`run`]): PNG figures of the paper's experiments (section V) from the
+//!   files `tending eval` and `tending train` write ([`records`]), and `pareto` and
+//!   `limits` (their modules say what they draw):
+//!   * `bars`: evaluation `results.csv` files, one per trained model (a scripted baseline
+//!     has one file and no training seeds). Per file, rows of the same setup (evaluation
+//!     seeds) are averaged; then, per setup and model, mean and population std over files,
+//!     i.e. over training seeds, the paper's "average and std as error bars" (Fig. 4, 6, 8,
+//!     9). Writes one chart each for parts delivered, collisions and MU, setups on the x
+//!     axis by robot count, and marks the paper's MU (`--paper`) on the MU chart.
+//!   * `curves`: training `log.csv` files; per model, mean over seeds of each logged metric
+//!     vs episodes with a std band (Fig. 5 and 7), and dashed lines where the curriculum
+//!     stage changes (from log.csv's `setup` column, or `--schedule`).
 //!
 //! The model of a file is the first word of its `policy` column (eval) or the path
 //! component naming a model (smappo, mappo, greedy, random); runs under a directory named
 //! like a setup (experiment A's `runs/exp/A/<setup>/<model>/seed*`) get a column of panels
 //! per setup.
 
-use crate::records::{self, finite, EvalResultRecord, PaperMuRecord, TrainLogRecord};
-use crate::stats::mean_std;
 use anyhow::{anyhow, bail, Context, Result};
 use clap::{Args, Subcommand};
 use plotters::prelude::*;
+use records::stats::mean_std;
+use records::{finite, EvalResultRecord, PaperMuRecord, TrainLogRecord};
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Path, PathBuf};
 
 mod bars;
+pub mod chart;
 mod curves;
 mod draw;
+pub mod episode;
+mod limits;
+mod pareto;
+pub mod training;
 use bars::*;
 use curves::*;
 use draw::{draw_bars, draw_curves};
@@ -44,10 +55,10 @@ pub enum PlotKind {
     /// Training curves (reward, parts, MU vs episodes) per model from log.csv files.
     Curves(CurvesArgs),
     /// Parts vs contacts per robot-step, a panel per setup, a point per eval results.csv.
-    Pareto(crate::plot_pareto::ParetoArgs),
+    Pareto(pareto::ParetoArgs),
     /// Parts as a multiple of the best script's per setup, with the target and the ceiling
     /// the parts bound puts on any controller (issue 10).
-    Limits(crate::plot_limits::LimitsArgs),
+    Limits(limits::LimitsArgs),
 }
 
 #[derive(Args, Debug)]
@@ -103,8 +114,8 @@ pub fn run(a: PlotArgs) -> Result<()> {
     match a.kind {
         PlotKind::Bars(b) => run_bars(&b),
         PlotKind::Curves(c) => run_curves(&c),
-        PlotKind::Pareto(p) => crate::plot_pareto::run(&p),
-        PlotKind::Limits(l) => crate::plot_limits::run(&l),
+        PlotKind::Pareto(p) => pareto::run(&p),
+        PlotKind::Limits(l) => limits::run(&l),
     }
 }
 
