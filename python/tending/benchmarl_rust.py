@@ -14,7 +14,7 @@ Needs benchmarl (``pip install './python[torchrl]'``)::
     algo = MappoConfig.get_from_yaml()
     algo.share_param_critic = False               # per-robot values, as the Rust critic (see below)
     exp = Experiment(task=tending.benchmarl.task("6.4_2"), algorithm_config=algo,
-                     model_config=model, critic_model_config=model, seed=0,
+                     model_config=model, seed=0,      # the critic: BenchMARL's copy of model
                      config=ExperimentConfig.get_from_yaml())
     exp.run()
     export_policy(exp, "mine.safetensors")        # tending eval --checkpoint mine.safetensors
@@ -49,6 +49,7 @@ from tensordict import TensorDictBase
 from torchrl.data import Composite, Unbounded
 
 from . import smappo_torch as st
+from ._benchmarl_model import model_args
 from .flat_recurrent import recurrent_forward, setup_counts, split_flat
 
 
@@ -56,19 +57,7 @@ class RustSmappo(Model):
     """See the module doc. Config: :class:`RustSmappoConfig`."""
 
     def __init__(self, machines: int, storages: int, arch: dict | None, checkpoint: str | None, **kwargs):
-        super().__init__(
-            input_spec=kwargs.pop("input_spec"),
-            output_spec=kwargs.pop("output_spec"),
-            agent_group=kwargs.pop("agent_group"),
-            input_has_agent_dim=kwargs.pop("input_has_agent_dim"),
-            n_agents=kwargs.pop("n_agents"),
-            centralised=kwargs.pop("centralised"),
-            share_params=kwargs.pop("share_params"),
-            device=kwargs.pop("device"),
-            action_spec=kwargs.pop("action_spec"),
-            model_index=kwargs.pop("model_index"),
-            is_critic=kwargs.pop("is_critic"),
-        )
+        super().__init__(**model_args(kwargs))
         self.counts = (machines, storages, self.n_agents - 1)
         self.hidden_state_name = (self.agent_group, f"_hidden_tending_{self.model_index}")
         self.rnn_keys = ["is_init", self.hidden_state_name]

@@ -6,8 +6,8 @@ Needs benchmarl (``pip install './python[torchrl]'``).
 
     from tending.benchmarl_smappo import SmappoConfig
     model = SmappoConfig.for_setup("6.4_2")     # machines and storages of the setup
-    Experiment(task=tending.benchmarl.task("6.4_2"), algorithm_config=MappoConfig..., 
-               model_config=model, critic_model_config=model, ...)
+    Experiment(task=tending.benchmarl.task("6.4_2"), algorithm_config=MappoConfig...,
+               model_config=model, ...)   # the critic: BenchMARL's copy of model
 
 Each robot's observation (``("agents", "observation")`` of :class:`tending.torchrl.TendingEnv`:
 self 3, machines 3M, storages 2K, peers 3(N-1), concatenated) is split into its entity
@@ -35,6 +35,8 @@ from benchmarl.models.common import Model, ModelConfig
 from tensordict import TensorDictBase
 from torch import nn
 
+from ._benchmarl_model import model_args
+
 # (name, features per entity) after the robot's own 3 features, in the observation's order
 GROUPS = (("machines", 3), ("storages", 2), ("peers", 3))
 SELF_DIM = 3
@@ -45,19 +47,7 @@ class SmappoEncoder(Model):
 
     def __init__(self, machines: int, storages: int, embed_dim: int, num_heads: int,
                  hidden: int, **kwargs):
-        super().__init__(
-            input_spec=kwargs.pop("input_spec"),
-            output_spec=kwargs.pop("output_spec"),
-            agent_group=kwargs.pop("agent_group"),
-            input_has_agent_dim=kwargs.pop("input_has_agent_dim"),
-            n_agents=kwargs.pop("n_agents"),
-            centralised=kwargs.pop("centralised"),
-            share_params=kwargs.pop("share_params"),
-            device=kwargs.pop("device"),
-            action_spec=kwargs.pop("action_spec"),
-            model_index=kwargs.pop("model_index"),
-            is_critic=kwargs.pop("is_critic"),
-        )
+        super().__init__(**model_args(kwargs))
         self.counts = {"machines": machines, "storages": storages,
                        "peers": self.n_agents - 1}
         d = self.input_leaf_spec.shape[-1]

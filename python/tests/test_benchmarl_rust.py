@@ -44,8 +44,10 @@ def test_mappo_iteration_exports_a_checkpoint_tending_eval_runs(tmp_path, tendin
     algo = MappoConfig.get_from_yaml()
     algo.share_param_critic = share_param_critic
     model = RustSmappoConfig.for_setup("6.4_2")
+    # no critic_model_config: BenchMARL's default is a copy of model_config, which it then
+    # marks is_critic (the same object for both would turn the policy into a critic)
     exp = Experiment(task=tb.task("6.4_2"), algorithm_config=algo, model_config=model,
-                     critic_model_config=model, seed=0, config=cfg)
+                     seed=0, config=cfg)
     before = {k: v.clone() for k, v in actor_of(exp.policy).state_dict().items()}
     exp.run()
     path = tmp_path / "benchmarl.safetensors"

@@ -177,7 +177,7 @@ def test_benchmarl_mappo_with_the_smappo_encoder_runs():
         cfg.checkpoint_at_end = False
         cfg.save_folder = str(tmp)
         return Experiment(task=tb.task("2.2_2"), algorithm_config=MappoConfig.get_from_yaml(),
-                          model_config=model, critic_model_config=model, seed=0, config=cfg)
+                          model_config=model, seed=0, config=cfg)  # critic: a copy of model
 
     import tempfile
 
