@@ -72,6 +72,10 @@ def main():
         rows = list(csv.DictReader(open(f)))
         if rows and "collision_events" not in rows[0]:
             todo.append((f, rows))
+    # trained models first (the verdicts need them), the scripts after: whole-floor
+    # matching on C's largest setups takes most of an hour here
+    todo.sort(key=lambda t: os.path.basename(os.path.dirname(os.path.dirname(t[0]))) in SCRIPTS
+              | {"shipped"})
     print(f"{len(todo)} of {len(files)} evaluations lack collision events", flush=True)
     by_hash = checkpoints(a.runs) if todo else {}
     bad = 0

@@ -17,6 +17,9 @@
 #   5. P at 6.4_2: one 200-step env per PPO update, 2,000 updates, 15 epochs, 1 mini-batch,
 #      both models, seeds 0-2
 #   6. AT at 14.10_4, then P at 14.10_4 (same)
+#   6a. T-extra: one tuning run beyond T's 8-run budget, the selected settings with MAPPO's
+#      hidden size 128 (`mappo_hidden`, newer than the campaign binary: run with
+#      target/release/tending, T9BIN overrides), judged like T on held-out seeds
 #   6b. PB: B's curriculum under the paper's schedule (Fig. 7's 400K axis: 2,000 updates of
 #      one 6.4_2 env, then 100 updates per stage), both models, seeds 0-2
 #   7. U's remaining runs (bench/experiments/run.sh U, as campaign.sh runs it)
@@ -38,7 +41,7 @@ R=results/paper
 HELD_OUT=100,101,102   # tuning is judged here, never on the campaign's eval seeds 0-2
 TUNE_SEED=10           # tuning trains on this seed, never on the campaign's 0-2
 COMMIT="${COMMIT:-1}"
-PATHS=(results/paper docs/experiments)
+PATHS=(results/paper docs/experiments)  # results/paper/T-extra included
 
 commit() { # message: the queue's own paths only, retried while another git holds the index
     [ "$COMMIT" = 1 ] || return 0
@@ -119,6 +122,15 @@ p_runs() { # setup: P, both models, seeds 0-2
             commit "Queue 47, P (paper's schedule) $s: $m seed $seed finished and evaluated"
         done
     done
+}
+
+t_extra() { # the hidden-size run (6a); a failure is reported, never stops the queue
+    local out="$R/T-extra/t9-ref-ent0.03-h128" bin="${T9BIN:-target/release/tending}"
+    [ -f "$out/.done" ] && [ -f "$out/eval/results.csv" ] && return 0
+    ( T="$bin"; train "$out" mappo "$TUNE_SEED" "$out.train.toml" --setup 6.4_2 --episodes 2000 \
+        && evaluate "$out/policy.safetensors" 6.4_2 "$out/eval" "$HELD_OUT" ) \
+        || { echo "!! T-extra failed (needs a tending with mappo_hidden: $bin)"; return 0; }
+    commit "Queue 47, T-extra: MAPPO hidden 128 finished and evaluated on held-out seeds"
 }
 
 pb_runs() { # PB: B's curriculum on the paper's schedule (stages at 400K, 420K, 440K steps)
@@ -245,6 +257,7 @@ tune
 at_runs 6.4_2
 p_runs 6.4_2
 at_runs 14.10_4
+t_extra
 p_runs 14.10_4
 pb_runs
 echo "=== U at $(date -u +%FT%TZ)"
