@@ -337,6 +337,20 @@ class _Recurrent(nn.Module):
         setattr(self, out_name, nn.Linear(hidden, d_out))
         self._out_name = out_name
 
+    def _gru_step(self, x: torch.Tensor, h: torch.Tensor) -> torch.Tensor:
+        """One step of ``self.gru`` (its weights, PyTorch's gate order r, z, n) written out:
+        ``aten::gru`` has no vmap batching rule, and torchrl 0.11's GAE (BenchMARL's MAPPO)
+        runs the critic under vmap. Same arithmetic as ``nn.GRU`` and ``policy/src/head.rs``."""
+        g = self.gru
+        gi = F.linear(x, g.weight_ih_l0, g.bias_ih_l0)
+        gh = F.linear(h, g.weight_hh_l0, g.bias_hh_l0)
+        i_r, i_z, i_n = gi.chunk(3, dim=-1)
+        h_r, h_z, h_n = gh.chunk(3, dim=-1)
+        r = torch.sigmoid(i_r + h_r)
+        z = torch.sigmoid(i_z + h_z)
+        n = torch.tanh(i_n + r * h_n)
+        return (1.0 - z) * n + z * h
+
     def _head(self, feat: torch.Tensor, h0: torch.Tensor | None, masks: torch.Tensor | None):
         """feat (T, B, H) -> outputs (T, B, d_out), last state (B, H)."""
         t, b, hd = feat.shape
@@ -347,8 +361,7 @@ class _Recurrent(nn.Module):
         for s in range(t):
             if masks is not None:
                 h = h * masks[s].unsqueeze(-1)
-            _, hn = self.gru(feat[s : s + 1], h.unsqueeze(0).contiguous())
-            h = hn[0]
+            h = self._gru_step(feat[s], h)
             outs.append(h)
         hs = torch.stack(outs)
         return getattr(self, self._out_name)(self.gru_ln(hs)), h
