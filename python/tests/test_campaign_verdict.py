@@ -150,20 +150,23 @@ def test_table_i_protocol_column_counts_finished_runs_only(tmp_path):
     assert "0.92 (0.00)" in row.split("|")[-3], row
 
 
-def eval_run(runs, exp, setup, model, seed, parts, collisions, mu):
+def eval_run(runs, exp, setup, model, seed, parts, collisions, mu, events=None):
     d = runs / exp / model / f"seed{seed}"
     (d / "eval").mkdir(parents=True, exist_ok=True)
     (d / ".done").touch()
     path = d / "eval" / "results.csv"
     new = not path.exists()
     with open(path, "a", newline="") as f:
-        w = csv.DictWriter(f, fieldnames=EVAL_FIELDS)
+        fields = EVAL_FIELDS + (["collision_events"] if events is not None else [])
+        w = csv.DictWriter(f, fieldnames=fields)
         if new:
             w.writeheader()
-        row = dict.fromkeys(EVAL_FIELDS, 0.0)
+        row = dict.fromkeys(fields, 0.0)
         row.update({"policy": f"{model} (policy.safetensors)", "setup": setup, "seed": 0,
                     "episodes": 50, "parts_delivered": parts, "collisions": collisions,
                     "mu": mu})
+        if events is not None:
+            row["collision_events"] = events
         w.writerow(row)
 
 
@@ -224,3 +227,24 @@ def test_zero_shot_near_and_far(tmp_path):
     (close,) = rows_of(tmp_path, "| Sec. V-C: zero-shot MAPPO safer")
     assert "**reproduced**" in far and "5/5" in far, far
     assert "**reproduced**" in close and "3/3" in close, close
+
+
+def test_collision_events_are_judged_apart_from_contact_steps(tmp_path):
+    # SMAPPO with fewer contact steps but more collision events (short pushes, often): the
+    # contact-step claim holds, the events claim does not; without events it is pending
+    paper = ["6.4_2", "12.8_4", "18.12_6", "24.16_8"]
+    for seed in range(3):
+        for s in paper:
+            eval_run(tmp_path, "B", s, "smappo", seed, 30.0, 100.0, 0.6)
+            eval_run(tmp_path, "B", s, "mappo", seed, 20.0, 200.0, 0.4)
+    (ev,) = rows_of(tmp_path, "| Collision events, Sec. V-B")
+    assert "**pending**" in ev and "lack collision events" in ev, ev
+    shutil.rmtree(tmp_path / "B")
+    for seed in range(3):
+        for s in paper:
+            eval_run(tmp_path, "B", s, "smappo", seed, 30.0, 100.0, 0.6, events=40.0)
+            eval_run(tmp_path, "B", s, "mappo", seed, 20.0, 200.0, 0.4, events=25.0)
+    (steps,) = rows_of(tmp_path, "| Sec. V-B: SMAPPO has fewer collisions")
+    (ev,) = rows_of(tmp_path, "| Collision events, Sec. V-B")
+    assert "**reproduced**" in steps, steps
+    assert "**not**" in ev and "40 vs 25" in ev and "collision events per episode" in ev, ev
