@@ -20,6 +20,7 @@
 //! ORCA filter, the shield) is the planner's, in the `plan` crate above this one.
 
 pub mod action;
+pub mod defaults;
 mod flat;
 pub mod nearest;
 

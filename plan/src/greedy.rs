@@ -25,16 +25,17 @@ pub struct GreedyParams {
 }
 
 impl Default for GreedyParams {
-    /// The default scenario's at scale 1 (sim's `SizeConfig`, `TaskConfig` and `dt`
-    /// defaults; `learn::baselines` tests that they agree).
+    /// The default scenario's at scale 1 (`obs::defaults`, the source of sim's defaults
+    /// too).
     fn default() -> Self {
+        use obs::defaults as d;
         Self {
-            robot_radius: 0.08,
-            machine_half: [0.12, 0.12],
-            storage_half: [0.15, 0.08],
-            k_speed: 0.5,
-            dt: 0.1,
-            prep_steps: 20,
+            robot_radius: d::ROBOT_RADIUS,
+            machine_half: d::MACHINE_HALF,
+            storage_half: d::STORAGE_HALF,
+            k_speed: d::K_SPEED,
+            dt: d::DT,
+            prep_steps: d::PREP_STEPS,
         }
     }
 }

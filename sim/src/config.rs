@@ -139,7 +139,7 @@ impl Default for WorldConfig {
         Self {
             room_size: 2.3,
             floor: Floor::Paper,
-            dt: 0.1,
+            dt: obs::defaults::DT,
             substeps: 1,
             episode_steps: 200,
         }
@@ -159,9 +159,9 @@ impl Default for PhysicsConfig {
 impl Default for TaskConfig {
     fn default() -> Self {
         Self {
-            prep_steps: 20,
-            k_speed: 0.5,
-            reach: 0.08,
+            prep_steps: obs::defaults::PREP_STEPS,
+            k_speed: obs::defaults::K_SPEED,
+            reach: obs::defaults::REACH,
             collision_distance: 0.005,
         }
     }
@@ -169,9 +169,10 @@ impl Default for TaskConfig {
 impl Default for SizeConfig {
     fn default() -> Self {
         Self {
-            robot_radius: 0.08,
-            machine_size: [0.24, 0.24],
-            storage_size: [0.3, 0.16],
+            robot_radius: obs::defaults::ROBOT_RADIUS,
+            // full sizes: twice the half extents
+            machine_size: obs::defaults::MACHINE_HALF.map(|h| 2.0 * h),
+            storage_size: obs::defaults::STORAGE_HALF.map(|h| 2.0 * h),
             occupancy: 0.35,
             box_gap_diameters: 1.25,
             min_robot_radius: 0.02,
