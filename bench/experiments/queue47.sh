@@ -49,7 +49,12 @@ commit() { # message: the queue's own paths only, retried while another git hold
     for i in 1 2 3 4 5 6 7 8 9 10; do
         if git add -- "${PATHS[@]}" 2>/dev/null; then
             git diff --cached --quiet -- "${PATHS[@]}" && return 0
-            git commit -q -m "$1" -- "${PATHS[@]}" >/dev/null 2>&1 && { echo "-- committed: $1"; return 0; }
+            # the message names what is staged: a skipped run's commit carries whatever
+            # else changed (another run's resume state, a report), never only its own label
+            local what; what=$(git diff --cached --name-only -- "${PATHS[@]}" | cut -d/ -f1-5 \
+                | sort -u | head -4 | tr '\n' ' ')
+            git commit -q -m "$1" -m "staged: $what" -- "${PATHS[@]}" >/dev/null 2>&1 \
+                && { echo "-- committed: $1"; return 0; }
         fi
         sleep 6
     done
