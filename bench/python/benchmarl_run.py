@@ -5,6 +5,16 @@ iteration's frames per second.
 
     python bench/python/benchmarl_run.py --algorithm mappo --setup 6.4_2 --frames 64000 --seed 0
 
+BenchMARL's stock MAPPO with its stock MLP (the issue-47 cross-check of our MAPPO,
+docs/experiments/benchmarl_mappo.md), trained away from the evaluation layouts and then
+judged on the layouts `tending eval --seeds 0,1,2 --episodes 50` plays:
+
+    python bench/python/benchmarl_run.py --model mlp --frames 400000 --seed 0 --n-envs 10 \
+        --frames-per-batch 6000 --train-seed-offset 1000 --checkpoint-every 10 --out OUT
+    python bench/python/benchmarl_run.py --model mlp --seed 0 --n-envs 10 \
+        --frames-per-batch 6000 --train-seed-offset 1000 --out OUT \
+        --eval-only 50 --eval-seeds 0,1,2 --eval-layouts tending
+
 Needs the package with its [torchrl] extra (pip install './python[torchrl]'). Everything not
 set here is BenchMARL's own default (benchmarl/conf/experiment/base_experiment.yaml and the
 algorithm's yaml); ``--set key=value`` overrides any ExperimentConfig field.
@@ -25,6 +35,8 @@ import time
 from pathlib import Path
 
 from benchmarl.experiment import Callback
+
+from tending.benchmarl import TendingClass
 
 ALGORITHMS = ("mappo", "ippo", "masac", "isac", "qmix", "vdn", "iql")
 ROOT = Path(__file__).resolve().parents[2]
@@ -99,10 +111,24 @@ def main(argv=None):
                         "the CSVs are appended to")
     p.add_argument("--eval-only", type=int, default=0, metavar="EPISODES",
                    help="no training: restore OUT's newest checkpoint (same flags as the run) "
-                        "and evaluate its policy (argmax) and the greedy script on the same "
-                        "EPISODES layouts for each of --eval-seeds; writes OUT/eval.csv")
+                        "and evaluate its policy (argmax), the greedy script and uniform "
+                        "random actions on the same EPISODES layouts for each of "
+                        "--eval-seeds; writes OUT/eval.csv (OUT/eval_tending.csv with "
+                        "--eval-layouts tending)")
     p.add_argument("--eval-seeds", default="0,1,2",
                    help="with --eval-only: env seeds, comma-separated")
+    p.add_argument("--eval-layouts", choices=("benchmarl", "tending"), default="benchmarl",
+                   help="with --eval-only: the layouts. benchmarl: EPISODES envs of env seed "
+                        "20,000 + s (one episode each); tending: the layouts `tending eval "
+                        "--seeds S --episodes EPISODES` runs (one env, its episodes in "
+                        "sequence: episode k of seed s laid out from episode_seed(s, 0, k)), so "
+                        "the rows compare with the campaign's tables (docs/experiments); "
+                        "needs a training run with --train-seed-offset (see there)")
+    p.add_argument("--train-seed-offset", type=int, default=0,
+                   help="training and BenchMARL's own evaluation envs use env seed SEED + "
+                        "this (default 0: SEED). TendingEnv's env 0 of seed s plays the layouts "
+                        "`tending eval --seeds s` evaluates, so a run judged with "
+                        "--eval-layouts tending on seeds 0-2 trains with an offset (e.g. 1000)")
     p.add_argument("--no-greedy", action="store_true",
                    help="skip the greedy baseline's episodes (reference rows in episodes.csv)")
     args = p.parse_args(argv)
@@ -118,6 +144,8 @@ def main(argv=None):
 
     task = tb.task(args.setup)
     setup = task.config["setup"]
+    if args.train_seed_offset:
+        task = SeedOffsetTask(task, args.train_seed_offset)
     name = args.algorithm if args.model == "mlp" else f"{args.algorithm}-{args.model}"
     out = args.out or ROOT / "target" / "benchmarl" / f"{name}_{setup}_seed{args.seed}"
     out.mkdir(parents=True, exist_ok=True)
@@ -192,7 +220,8 @@ def main(argv=None):
         experiment = Experiment(task=task, algorithm_config=algo, model_config=model,
                                 critic_model_config=critic, seed=args.seed, config=cfg)
         evaluate(experiment.policy, setup, episode_steps, args.eval_only,
-                 [int(x) for x in args.eval_seeds.split(",")], resume_frames, out)
+                 [int(x) for x in args.eval_seeds.split(",")], resume_frames, out,
+                 layouts=args.eval_layouts)
         return
 
     log = CsvLog(out, append_from=resume_frames if args.resume else None)
@@ -244,42 +273,88 @@ def model_configs(args, setup, MlpConfig):
     return MlpConfig.get_from_yaml(), None
 
 
-def evaluate(policy, setup, steps, episodes, seeds, frames, out):
-    """The restored policy (argmax) and the greedy script on the same layouts (one env per
-    episode, env seed 20,000 + s: none of training's or its evaluations' seeds)."""
+def evaluate(policy, setup, steps, episodes, seeds, frames, out, layouts="benchmarl"):
+    """The restored policy (argmax), the greedy script and uniform random actions on the
+    same layouts. layouts "benchmarl": one env per episode, env seed 20,000 + s (none of
+    training's or its evaluations' seeds); "tending": one env playing EPISODES episodes in
+    sequence from seed s, the layouts of `tending eval --seeds s --episodes EPISODES`."""
+    import torch
     from torchrl.envs.utils import ExplorationType, set_exploration_type
 
     from tending.torchrl import TendingEnv
 
     rows = []
     for s in seeds:
-        for name in ("policy", "greedy"):
-            env = TendingEnv(setup, num_envs=episodes, seed=20_000 + s)
+        for name in ("policy", "greedy", "random"):
+            if layouts == "tending":
+                env = TendingEnv(setup, num_envs=1, seed=s)
+                n_steps = steps * episodes
+            else:
+                env = TendingEnv(setup, num_envs=episodes, seed=20_000 + s)
+                n_steps = steps
+            torch.manual_seed(s)
             if name == "policy":
                 with set_exploration_type(ExplorationType.DETERMINISTIC), torch_no_grad():
-                    td = env.rollout(steps, policy=policy, break_when_any_done=False)
-            else:
-                td = env.rollout(steps, break_when_any_done=False, policy=lambda t, e=env:
+                    td = env.rollout(n_steps, policy=policy, break_when_any_done=False)
+            elif name == "greedy":
+                td = env.rollout(n_steps, break_when_any_done=False, policy=lambda t, e=env:
                                  t.set(("agents", "action"), e.greedy_actions()))
-            for e, r in enumerate(_rollout_rows(td.unbind(0))):
+            else:
+                td = env.rollout(n_steps, break_when_any_done=False)
+            found = list(_all_episode_rows(td.unbind(0)))
+            assert len(found) == episodes, (name, s, len(found))
+            for e, r in enumerate(found):
                 rows.append([name, frames, s, e, *r])
-    with open(out / "eval.csv", "w", newline="") as f:
+    suffix = "" if layouts == "benchmarl" else f"_{layouts}"
+    path = out / f"eval{suffix}.csv"
+    with open(path, "w", newline="") as f:
         w = csv.writer(f)
         w.writerow(["method", "frames", "seed", "episode", "parts_delivered", "collisions",
                     "mu", "team_reward"])
         w.writerows(rows)
-    print(f"{setup}, checkpoint at {frames} frames, {episodes} episodes x seeds {seeds}:")
-    for name in ("policy", "greedy"):
+    print(f"{setup}, checkpoint at {frames} frames, {episodes} episodes x seeds {seeds} "
+          f"({layouts} layouts):")
+    for name in ("policy", "greedy", "random"):
         mine = [r for r in rows if r[0] == name]
-        mean = [sum(r[k] for r in mine) / len(mine) for k in (4, 5, 6)]
-        print(f"  {name:7s} parts {mean[0]:6.2f}  contact steps {mean[1]:7.1f}  MU {mean[2]:.3f}")
-    print(f"wrote {out / 'eval.csv'}")
+        mean = [sum(r[k] for r in mine) / len(mine) for k in (4, 5, 6, 7)]
+        print(f"  {name:7s} parts {mean[0]:6.2f}  contact steps {mean[1]:7.1f}  MU {mean[2]:.3f}"
+              f"  team reward {mean[3]:8.2f}")
+    print(f"wrote {path}")
+
+
+def _all_episode_rows(rollouts):
+    """(parts_delivered, collisions, mu, team_reward) of every episode that ended in each
+    env's trajectory, in order."""
+    for td in rollouts:
+        done = td.get(("next", "done")).reshape(-1)
+        info = td.get(("next", "agents", "info"))
+        reward = td.get(("next", "agents", "reward"))
+        start = 0
+        for last in done.nonzero()[:, 0].tolist():
+            yield (float(info["parts_delivered"][last, 0, 0]),
+                   float(info["collisions"][last, 0, 0]),
+                   round(float(info["mu"][last, 0, 0]), 4),
+                   round(float(reward[start:last + 1].sum()), 3))
+            start = last + 1
 
 
 def torch_no_grad():
     import torch
 
     return torch.no_grad()
+
+
+class SeedOffsetTask(TendingClass):
+    """A tending BenchMARL task whose envs (training and BenchMARL's evaluation) get env
+    seed ``seed + offset`` (module level: BenchMARL pickles the task into config.pkl)."""
+
+    def __init__(self, task, offset):
+        super().__init__(name=task.name, config=task.config)
+        self.offset = offset
+
+    def get_env_fun(self, num_envs, continuous_actions, seed, device):
+        return super().get_env_fun(num_envs, continuous_actions, (seed or 0) + self.offset,
+                                   device)
 
 
 class CsvLog(Callback):

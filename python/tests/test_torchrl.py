@@ -229,3 +229,44 @@ def test_benchmarl_run_trains_checkpoints_and_evaluates_beside_greedy(tmp_path):
         run.main(base + ["--algo-set", "no_such_field=1"])
     with pytest.raises(SystemExit, match="no checkpoint"):
         run.main(base[:-1] + [str(tmp_path / "empty"), "--eval-only", "2"])
+
+
+def test_benchmarl_run_evaluates_on_the_layouts_tending_eval_plays(tmp_path, request):
+    """--eval-layouts tending plays, per eval seed s, episodes 0.. of one env of seed s:
+    the layouts `tending eval --seeds s` plays, so its greedy rows equal `tending eval
+    --policy greedy`'s (parts, contacts, MU per seed); --train-seed-offset trains elsewhere
+    (docs/experiments/benchmarl_mappo.md)."""
+    need_torchrl()
+    pytest.importorskip("benchmarl", reason=f"benchmarl: {SKIP}")
+    tending_bin = request.getfixturevalue("tending_bin")  # only once the extra is there
+    import csv
+    import importlib.util
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    path = Path(__file__).resolve().parents[2] / "bench" / "python" / "benchmarl_run.py"
+    spec = importlib.util.spec_from_file_location("benchmarl_run", path)
+    run = importlib.util.module_from_spec(spec)
+    sys.modules["benchmarl_run"] = run
+    spec.loader.exec_module(run)
+    base = ["--algorithm", "mappo", "--model", "mlp", "--hparams", "mappo", "--setup", "2.2_2",
+            "--train-seed-offset", "1000", "--out", str(tmp_path / "run")]
+    run.main(base + ["--frames", "800", "--eval-every", "0", "--checkpoint-every", "1",
+                     "--no-greedy"])
+    run.main(base + ["--eval-only", "3", "--eval-seeds", "0,1", "--eval-layouts", "tending"])
+    with open(tmp_path / "run" / "eval_tending.csv") as f:
+        rows = list(csv.DictReader(f))
+    for method in ("policy", "greedy", "random"):
+        assert len([r for r in rows if r["method"] == method]) == 6, method
+    p = subprocess.run([tending_bin, "eval", "--policy", "greedy", "--setups", "2.2_2",
+                        "--seeds", "0,1", "--episodes", "3", "--out", str(tmp_path / "rust")],
+                       capture_output=True, text=True, timeout=600)
+    assert p.returncode == 0, p.stderr
+    with open(tmp_path / "rust" / "results.csv") as f:
+        rust = {r["seed"]: r for r in csv.DictReader(f)}
+    for seed in ("0", "1"):
+        mine = [r for r in rows if r["method"] == "greedy" and r["seed"] == seed]
+        for key in ("parts_delivered", "collisions", "mu"):
+            py = sum(float(r[key]) for r in mine) / len(mine)
+            assert py == pytest.approx(float(rust[seed][key]), abs=1e-3), (seed, key)
