@@ -159,16 +159,21 @@ fn time_penalty_only_when_nothing_else_happens() {
     assert!((env.rewards()[0] - (-0.01)).abs() < 1e-7);
 }
 
-#[test]
-fn collision_penalty_and_counts_per_robot() {
+/// Two robots 2 cm apart, facing each other; only the collision reward on.
+fn two_robots_a_hair_apart() -> Env {
     let r = 0.08;
-    let mut env = env_with_cfg(
+    env_with_cfg(
         cfg_only("collision"),
         "2.1_1",
         &[[-r - 0.01, 0.0], [r + 0.01, 0.0]],
         &[[0.0, 0.8]],
         &[[0.0, -0.8]],
-    );
+    )
+}
+
+#[test]
+fn collision_penalty_and_counts_per_robot() {
+    let mut env = two_robots_a_hair_apart();
     // Drive into each other.
     env.step_actions(&[2, 1]).unwrap();
     assert_eq!(env.events()[0].collisions, 1);
@@ -180,14 +185,7 @@ fn collision_penalty_and_counts_per_robot() {
 
 #[test]
 fn a_held_contact_is_one_collision_event_and_many_contact_steps() {
-    let r = 0.08;
-    let mut env = env_with_cfg(
-        cfg_only("collision"),
-        "2.1_1",
-        &[[-r - 0.01, 0.0], [r + 0.01, 0.0]],
-        &[[0.0, 0.8]],
-        &[[0.0, -0.8]],
-    );
+    let mut env = two_robots_a_hair_apart();
     // Pushed into each other for five steps: 10 contact steps, one onset per robot.
     for _ in 0..5 {
         env.step_actions(&[2, 1]).unwrap();
