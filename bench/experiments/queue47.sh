@@ -20,6 +20,8 @@
 #   6a. T-extra: one tuning run beyond T's 8-run budget, the selected settings with MAPPO's
 #      hidden size 128 (`mappo_hidden`, newer than the campaign binary: run with
 #      target/release/tending, T9BIN overrides), judged like T on held-out seeds
+#   6a'. AT128: AT again with MAPPO's hidden size 128 (T-extra beat T's selection on the
+#      held-out seeds: 0.474 against 0.441), 6.4_2 and 14.10_4, seeds 0-2, same binary as 6a
 #   6b. PB: B's curriculum under the paper's schedule (Fig. 7's 400K axis: 2,000 updates of
 #      one 6.4_2 env, then 100 updates per stage), both models, seeds 0-2
 #   7. U's remaining runs (bench/experiments/run.sh U, as campaign.sh runs it)
@@ -138,6 +140,20 @@ t_extra() { # the hidden-size run (6a); a failure is reported, never stops the q
     commit "Queue 47, T-extra: MAPPO hidden 128 finished and evaluated on held-out seeds"
 }
 
+at128_runs() { # setup: AT128, AT's settings with mappo_hidden = 128 (6a')
+    local s="$1" seed cfg="$R/AT128_$1.train.toml" bin="${T9BIN:-target/release/tending}"
+    [ -f "$R/AT_$s.train.toml" ] || { echo "-- AT128 $s skipped: no AT config"; return 0; }
+    { grep -v '^mappo_hidden' "$R/AT_$s.train.toml"; echo "mappo_hidden = 128"; } >"$cfg"
+    for seed in $SEEDS; do
+        local out="$R/AT128/$s/mappo/seed$seed"
+        ( T="$bin"; train "$out" mappo "$seed" "$cfg" --setup "$s" --episodes 2000 \
+            && evaluate "$out/policy.safetensors" "$s" "$out/eval" "$EVAL_SEEDS" ) \
+            || { echo "!! AT128 $s seed $seed failed (needs mappo_hidden: $bin)"; return 0; }
+        report >/dev/null 2>&1 || true
+        commit "Queue 47, AT128 $s: MAPPO hidden 128 seed $seed finished and evaluated"
+    done
+}
+
 pb_runs() { # PB: B's curriculum on the paper's schedule (stages at 400K, 420K, 440K steps)
     local cfg="$R/PB.train.toml" seed m
     header 1 15 1 24 16 8 >"$cfg"
@@ -235,6 +251,16 @@ report() {
         done
         table_of AT "AT: A's SMAPPO against MAPPO with the tuned settings (T.md), A's budget" "${f[@]}" -- "${l[@]}"
     fi
+    local a128=() a128l=()
+    for s in $R/AT128/*/; do
+        s=$(basename "$s")
+        a128+=($R/AT128/$s/mappo/seed*/eval/results.csv $R/A/$s/smappo/seed*/eval/results.csv)
+        for x in $R/AT128/$s/mappo/seed*/log.csv $R/A/$s/smappo/seed*/log.csv; do
+            [ -f "$(dirname "$x")/.done" ] && a128l+=("$x")
+        done
+    done
+    [ ${#a128[@]} -eq 0 ] || table_of AT128 "AT128: A's SMAPPO against the tuned MAPPO with hidden size 128, A's budget" \
+        "${a128[@]}" -- "${a128l[@]}"
     local pl=()
     for x in $R/P/*/*/seed*/log.csv; do [ -f "$(dirname "$x")/.done" ] && pl+=("$x"); done
     table_of P "P: the paper's schedule (1 env per update, 2,000 updates, 15 epochs, 1 mini-batch)" \
@@ -263,6 +289,8 @@ at_runs 6.4_2
 p_runs 6.4_2
 at_runs 14.10_4
 t_extra
+at128_runs 6.4_2
+at128_runs 14.10_4
 p_runs 14.10_4
 pb_runs
 echo "=== U at $(date -u +%FT%TZ)"
