@@ -319,7 +319,7 @@ impl Fleet {
         };
         self.health.observe(sample);
         println!(
-            "t={:>6.1}s step={:>5} robots={:>3} on_state={:>3} delivered={:>4} collected={:>4} collisions={:>4} (robot {} machine {} storage {} wall {}) MU={:.3} health: {}",
+            "t={:>6.1}s step={:>5} robots={:>3} on_state={:>3} delivered={:>4} collected={:>4} collisions={:>4} (robot {} machine {} storage {} wall {}; events {}) MU={:.3} health: {}",
             sample.sim_time,
             v["step"],
             v["robots"],
@@ -331,6 +331,7 @@ impl Fleet {
             v["collisions_robot_machine"],
             v["collisions_robot_storage"],
             v["collisions_robot_wall"],
+            v["collision_events"],
             v["mu"].as_f64().unwrap_or(0.0),
             self.health.status()
         );

@@ -100,6 +100,9 @@ pub struct MetricsLine {
     pub collisions_robot_machine: u32,
     pub collisions_robot_storage: u32,
     pub collisions_robot_wall: u32,
+    /// Collision events: a robot starting to touch something (`sim::Metrics`), the paper's
+    /// count beside the contact steps above.
+    pub collision_events: u32,
     pub p_max: u32,
     pub mu: f64,
     /// Robots whose latest command answers a state at most [`ON_STATE_WINDOW_S`] old: they
@@ -544,6 +547,7 @@ impl Core {
             collisions_robot_machine: m.collisions_robot_machine,
             collisions_robot_storage: m.collisions_robot_storage,
             collisions_robot_wall: m.collisions_robot_wall,
+            collision_events: m.collision_events,
             p_max: m.p_max,
             mu: m.utilization(),
             robots_on_state: self.robots_on_state(),

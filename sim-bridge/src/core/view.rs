@@ -45,6 +45,7 @@ impl Core {
                         m.collisions_robot_storage.to_string(),
                     ),
                     kv("collisions_robot_wall", m.collisions_robot_wall.to_string()),
+                    kv("collision_events", m.collision_events.to_string()),
                     kv("machine_utilization", format!("{:.4}", m.mu)),
                     kv("p_max", m.p_max.to_string()),
                     kv("robots", m.robots.to_string()),
