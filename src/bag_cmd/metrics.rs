@@ -107,6 +107,13 @@ pub(super) fn print_metrics_totals(m: &bag::BagMetrics) {
         } else {
             println!("collisions by kind: n/a (recorded by a bridge that reported only totals)");
         }
+        // bridges before issue 47 did not count collision events
+        if last_reported.contains_key("collision_events") {
+            println!(
+                "collision events from /tending/metrics: {}",
+                get(last_reported, "collision_events")
+            );
+        }
         if let Some(rep) = last_reported
             .get("parts_delivered")
             .and_then(|v| v.parse::<u64>().ok())
