@@ -108,7 +108,11 @@ evaluate() { # checkpoint setups out eval-seeds (skipped when out has them, of t
         return
     fi
     echo "== $(date -u +%FT%TZ) eval $1 -> $3 ($2; eval seeds $4)"
-    "$T" eval --checkpoint "$1" --setups "$2" --episodes "$EVAL_EPISODES" --seeds "$4" --out "$3" >/dev/null
+    # evaluations use the newest build when there is one: it counts collision events, and
+    # evaluation is deterministic across versions (onsets.py reproduced every old column
+    # of 105 evaluations); training keeps the campaign binary
+    local ev="$T"; [ -x target/release/tending ] && ev=target/release/tending
+    "$ev" eval --checkpoint "$1" --setups "$2" --episodes "$EVAL_EPISODES" --seeds "$4" --out "$3" >/dev/null
     echo "$sum" >"$3/checkpoint.sha256"
 }
 
