@@ -432,6 +432,14 @@ def compute_table(runs_dir, cores=2):
     return out
 
 
+def table_i_rows(ex, pe, x, label, gain_label):
+    """Table I at 6.4_2 and 14.10_4 and the +61 % headline for one more reading of
+    experiment A (`x`: AT, AT128), each labelled with `label` formatted by the setup."""
+    paper = {"6.4_2": "SMAPPO 0.74, MAPPO 0.51", "14.10_4": "SMAPPO 0.69, MAPPO 0.65"}
+    return [(label.format(s), paper[s], table_verdict(ex[x], pe[x], [s])) for s in paper] + [
+        (gain_label, "+61 %", gain_verdict(ex[x], SETUPS[x], 61))]
+
+
 def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--runs", default="results/paper")
@@ -471,19 +479,11 @@ def main():
         ("Fig. 5: SMAPPO reaches 50 % of its final reward in 100 episodes, 70 % in 200 (14.10_4)",
          "100 / 200 episodes", convergence(ex["A"])),
         "Full retraining against MAPPO tuned as SMAPPO was (AT: A's SMAPPO, MAPPO re-trained with docs/experiments/T.md's settings, A's budget)",
-        ("Table I at 6.4_2 against the tuned MAPPO", "SMAPPO 0.74, MAPPO 0.51",
-         table_verdict(ex["AT"], pe["AT"], ["6.4_2"])),
-        ("Table I at 14.10_4 against the tuned MAPPO", "SMAPPO 0.69, MAPPO 0.65",
-         table_verdict(ex["AT"], pe["AT"], ["14.10_4"])),
-        ("Abstract: up to 61 % more parts, against the tuned MAPPO (6.4_2, 14.10_4)", "+61 %",
-         gain_verdict(ex["AT"], SETUPS["AT"], 61)),
+        *table_i_rows(ex, pe, "AT", "Table I at {} against the tuned MAPPO",
+                      "Abstract: up to 61 % more parts, against the tuned MAPPO (6.4_2, 14.10_4)"),
         "Against the tuned MAPPO with hidden size 128 (AT128: T-extra's settings, beyond T's 8-run budget, A's budget)",
-        ("Hidden 128: Table I at 6.4_2", "SMAPPO 0.74, MAPPO 0.51",
-         table_verdict(ex["AT128"], pe["AT128"], ["6.4_2"])),
-        ("Hidden 128: Table I at 14.10_4", "SMAPPO 0.69, MAPPO 0.65",
-         table_verdict(ex["AT128"], pe["AT128"], ["14.10_4"])),
-        ("Hidden 128: up to 61 % more parts (6.4_2, 14.10_4)", "+61 %",
-         gain_verdict(ex["AT128"], SETUPS["AT128"], 61)),
+        *table_i_rows(ex, pe, "AT128", "Hidden 128: Table I at {}",
+                      "Hidden 128: up to 61 % more parts (6.4_2, 14.10_4)"),
         "The paper's schedule as its figures read it (P: one 200-step env per PPO update, 2,000 updates, 15 epochs, 1 mini-batch)",
         ("Table I at 6.4_2, paper's schedule", "SMAPPO 0.74, MAPPO 0.51",
          table_verdict(ex["P"], pe["P"], ["6.4_2"])),
